@@ -1,0 +1,97 @@
+#include "palpa/field/build.h"
+
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <new>
+
+#include <fmt/format.h>
+
+#include "palpa/field/indicator.h"
+
+namespace palpa::field {
+namespace {
+
+constexpr std::size_t kMinPoints = 4;
+
+// Share of the total progress at the end of each stage (rough typical cost).
+constexpr double kProgressPacked = 0.4;
+constexpr double kProgressIndicator = 0.6;
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& device_positions,
+                                        const std::vector<Eigen::Vector3d>& normals, const BuildOptions& options,
+                                        const std::function<void(double)>& progress) {
+  const auto report = [&](double fraction) {
+    if (progress) progress(fraction);
+  };
+  if (device_positions.size() != normals.size()) {
+    return std::unexpected(
+        Error{fmt::format("build: {} positions but {} normals", device_positions.size(), normals.size())});
+  }
+  if (device_positions.size() < kMinPoints) {
+    return std::unexpected(
+        Error{fmt::format("build: {} points; at least {} are needed", device_positions.size(), kMinPoints)});
+  }
+  std::vector<Eigen::Vector3d> unit_normals(normals.size());
+  for (std::size_t i = 0; i < normals.size(); ++i) {
+    if (!device_positions[i].allFinite()) {
+      return std::unexpected(Error{fmt::format("build: position {} is not finite", i)});
+    }
+    const double length = normals[i].norm();
+    if (!std::isfinite(length) || !(length > 0.0)) {
+      return std::unexpected(Error{fmt::format("build: normal {} is zero or not finite", i)});
+    }
+    unit_normals[i] = normals[i] / length;
+  }
+  auto grid = MakeGrid(device_positions, options.grid);
+  if (!grid) return std::unexpected(grid.error());
+  report(0.0);
+
+  BuildResult result;
+  // r_max: no packed ball is larger than the object's bounding box.
+  Eigen::Vector3d lo = device_positions.front();
+  Eigen::Vector3d hi = lo;
+  for (const Eigen::Vector3d& p : device_positions) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const double r_max = (hi - lo).maxCoeff();
+
+  auto start = std::chrono::steady_clock::now();
+  result.packing = PackSpheres(device_positions, unit_normals, r_max);
+  result.seconds_packing = SecondsSince(start);
+  report(kProgressPacked);
+
+  start = std::chrono::steady_clock::now();
+  const std::vector<std::uint8_t> indicator = Indicator(*grid, result.packing);
+  result.seconds_indicator = SecondsSince(start);
+  report(kProgressIndicator);
+
+  start = std::chrono::steady_clock::now();
+  result.field = ErosionField(*grid, indicator);
+  result.seconds_distance = SecondsSince(start);
+  report(1.0);
+  return result;
+}
+
+}  // namespace
+
+std::expected<BuildResult, Error> BuildErosionField(const std::vector<Eigen::Vector3d>& device_positions,
+                                                    const std::vector<Eigen::Vector3d>& normals,
+                                                    const BuildOptions& options,
+                                                    std::function<void(double fraction)> progress) {
+  // Keep the API exception-free: allocation of a large grid, or a throwing callback, ends here.
+  try {
+    return Build(device_positions, normals, options, progress);
+  } catch (const std::bad_alloc&) {
+    return std::unexpected(Error{"build: out of memory (grid too large?)"});
+  } catch (const std::exception& e) {
+    return std::unexpected(Error{fmt::format("build: {}", e.what())});
+  }
+}
+
+}  // namespace palpa::field
