@@ -1,0 +1,161 @@
+// palpa as a user runs it: exit codes, messages, no partial outputs, and outputs checked against
+// independent truths (the blob's own bytes for export, the analytic sphere for trace synth).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "palpa/blob/blob.h"
+#include "palpa/trace/trace.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Outcome {
+  int code = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Outcome Palpa(const std::string& args) {
+  const std::string cmd = std::string(PALPA_BIN) + " " + args + " 2>&1";
+  Outcome r;
+  std::FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) return r;
+  std::array<char, 4096> buf;
+  std::size_t n = 0;
+  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+  const int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("palpa-cli-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& leaf) const { return (dir_ / leaf).string(); }
+  std::string Write(const std::string& leaf, const std::string& text) const {
+    std::ofstream(Path(leaf)) << text;
+    return Path(leaf);
+  }
+  fs::path dir_;
+};
+
+constexpr const char* kFourPoints = "0 0 0 0 0 -1\n1 0 0 1 0 0\n0 1 0 0 1 0\n0 0 1 0 0 1\n";
+
+TEST_F(Cli, BadPointFilesExitTwoAndWriteNothing) {
+  struct Case {
+    std::string name, text, expect;
+  };
+  const Case cases[] = {
+      {"malformed.xyz", std::string(kFourPoints) + "1 2 3 4\n", "malformed.xyz:5"},
+      {"nan.xyz", std::string(kFourPoints) + "nan 0 0 0 0 1\n", "nan.xyz:5"},
+      {"zero.xyz", std::string(kFourPoints) + "0.5 0.5 0.5 0 0 0\n", "zero.xyz:5"},
+      {"few.xyz", "0 0 0 0 0 1\n1 0 0 1 0 0\n0 1 0 0 1 0\n", "few.xyz"},
+  };
+  for (const Case& c : cases) {
+    const std::string in = Write(c.name, c.text);
+    const Outcome r = Palpa("build " + in + " -o " + Path("out.palpa") + " --cells 32");
+    EXPECT_EQ(r.code, 2) << c.name << ": " << r.out;
+    EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.name << ": " << r.out;
+    EXPECT_FALSE(fs::exists(Path("out.palpa"))) << c.name;
+  }
+  const Outcome missing = Palpa("build " + Path("missing.xyz") + " -o " + Path("out.palpa"));
+  EXPECT_EQ(missing.code, 2);
+  EXPECT_NE(missing.out.find("missing.xyz"), std::string::npos) << missing.out;
+  EXPECT_FALSE(fs::exists(Path("out.palpa")));
+  // Nothing else (no temporary) is left in the directory.
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().extension(), ".xyz") << e.path();
+}
+
+TEST_F(Cli, FailedBuildKeepsThePreviousOutput) {
+  const std::string out = Path("field.palpa");
+  ASSERT_EQ(Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + out + " --cells 40 -q").code, 0);
+  const auto before = fs::file_size(out);
+  const std::string bad = Write("bad.xyz", "1 2 3\n");
+  EXPECT_EQ(Palpa("build " + bad + " -o " + out).code, 2);
+  ASSERT_TRUE(fs::exists(out));
+  EXPECT_EQ(fs::file_size(out), before);
+  EXPECT_EQ(Palpa("info " + out).code, 0);
+}
+
+TEST_F(Cli, InfoExportAndTraceSynthOnSphere926) {
+  const std::string field = Path("sphere.palpa");
+  const Outcome b = Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + field + " --cells 100");
+  ASSERT_EQ(b.code, 0) << b.out;
+
+  const Outcome info = Palpa("info --json " + field);
+  ASSERT_EQ(info.code, 0) << info.out;
+  EXPECT_NE(info.out.find("\"method\": \"erosion\""), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("\"point_count\": 926"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("\"checksum\": \"ok\""), std::string::npos) << info.out;
+
+  // export: NPY v1.0, '<f4', C order, shape (nx, ny, nz), values = blob Q16.16 · voxel.
+  const std::string npy = Path("sphere.npy");
+  ASSERT_EQ(Palpa("export " + field + " --npy " + npy).code, 0);
+  auto bytes = palpa::blob::ReadFile(field.c_str()).value();
+  const auto view = palpa::blob::Verify(bytes).value();
+  std::ifstream f(npy, std::ios::binary);
+  std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(data.compare(0, 6, "\x93NUMPY"), 0);
+  std::uint16_t hlen = 0;
+  std::memcpy(&hlen, data.data() + 8, 2);
+  EXPECT_EQ((10 + hlen) % 64, 0);
+  const std::string header = data.substr(10, hlen);
+  const std::string shape = "'shape': (" + std::to_string(view.dims[0]) + ", " + std::to_string(view.dims[1]) + ", " +
+                            std::to_string(view.dims[2]) + ")";
+  EXPECT_NE(header.find(shape), std::string::npos) << header;
+  EXPECT_NE(header.find("'<f4'"), std::string::npos);
+  const std::size_t count = static_cast<std::size_t>(view.dims[0] * view.dims[1] * view.dims[2]);
+  ASSERT_EQ(data.size(), 10 + hlen + 4 * count);
+  for (std::size_t n = 0; n < count; n += 97) {
+    float v = 0;
+    std::memcpy(&v, data.data() + 10 + hlen + 4 * n, 4);
+    EXPECT_FLOAT_EQ(v, static_cast<float>(view.phi[n] / 65536.0 * view.voxel_m)) << n;
+  }
+
+  // trace synth poke 1 mm deep: the deepest HIP lies 1 mm inside the analytic sphere
+  // (radius 10 model units → 0.03 m at --fit 0.06), within the erosion field's surface error.
+  const std::string poke = Path("poke.csv");
+  const Outcome t = Palpa("trace synth --field " + field + " --kind poke --depth 0.001 -o " + poke);
+  ASSERT_EQ(t.code, 0) << t.out;
+  auto samples = palpa::trace::ReadTrace(poke);
+  ASSERT_TRUE(samples.has_value()) << samples.error().message;
+  double min_r = 1, first_r = 0;
+  for (const auto& s : *samples) {
+    const double dx = s.hip_m[0] - view.fit_offset_m[0], dy = s.hip_m[1] - view.fit_offset_m[1],
+                 dz = s.hip_m[2] - view.fit_offset_m[2];
+    const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
+    if (&s == &samples->front()) first_r = r;
+    min_r = std::min(min_r, r);
+  }
+  const double radius = 10 * view.fit_scale;
+  EXPECT_NEAR(first_r, radius + 0.010, 2 * view.voxel_m);  // starts 10 mm off the surface
+  EXPECT_NEAR(min_r, radius - 0.001, 2 * view.voxel_m);    // erosion surface within ~1.5 voxels
+  // Minimum-jerk at 1 kHz: no jump between samples larger than 0.1 mm.
+  for (std::size_t i = 1; i < samples->size(); ++i) {
+    const auto& a = (*samples)[i - 1].hip_m;
+    const auto& c = (*samples)[i].hip_m;
+    EXPECT_LT(std::hypot(c[0] - a[0], c[1] - a[1], c[2] - a[2]), 1e-4) << i;
+  }
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  EXPECT_EQ(Palpa("build").code, 2);
+  EXPECT_EQ(Palpa("build x.xyz -o y.palpa --method nonsense").code, 2);
+  EXPECT_EQ(Palpa("frobnicate").code, 2);
+  EXPECT_EQ(Palpa("info " + Path("missing.palpa")).code, 2);
+}
+
+}  // namespace
