@@ -101,8 +101,8 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
   if (have < h.payload_size)
     return Fail("payload", size, "truncated: %zu of %llu payload bytes present", have,
                 static_cast<unsigned long long>(h.payload_size));
-  if (have > h.payload_size)
-    return Fail("payload", kHeaderSize + h.payload_size, "%llu trailing bytes after the payload",
+  if (have > h.payload_size)  // here payload_size < have, so it fits size_t
+    return Fail("payload", kHeaderSize + static_cast<std::size_t>(h.payload_size), "%llu trailing bytes after the payload",
                 static_cast<unsigned long long>(have - h.payload_size));
 
   std::uint32_t crc = Crc32c(blob.first(kCrcOffset));
@@ -112,7 +112,9 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
 
   const auto* phi = reinterpret_cast<const std::int32_t*>(blob.data() + kHeaderSize);
   const std::int32_t limit = static_cast<std::int32_t>(h.band_voxels) << 16;
-  for (std::uint64_t n = 0; n < nodes; ++n) {
+  // payload_size == have (checked above), so nodes fits size_t even on 32-bit boards.
+  const auto count = static_cast<std::size_t>(nodes);
+  for (std::size_t n = 0; n < count; ++n) {
     if (phi[n] > limit || phi[n] < -limit)
       return Fail("payload", kHeaderSize + 4 * n, "φ = %.4f voxels is outside the band ±%u",
                   static_cast<double>(phi[n]) / 65536.0, h.band_voxels);
