@@ -3,7 +3,10 @@
 // are wrapped at link time (-Wl,--wrap=…, see CMakeLists.txt). While `g_armed` is set on a thread,
 // each call is counted. Replacing operator new catches allocations made inside libstdc++.so
 // (which --wrap alone misses); --wrap catches direct C calls in our objects
-// (/work/shared/notes/cross-rt.md §5). The sibling tests prove the counters see a call.
+// (/work/shared/notes/cross-rt.md §5). The sibling tests prove the counters see a call, and
+// DISABLED_MustFail.AllocationInsideArmedProxyTicks, run by ctest as
+// alloc_free.fail_allocation_inside_ticks with WILL_FAIL (tests/integration/CMakeLists.txt),
+// proves that the tick test's assertions fail when a tick allocates.
 
 #include <gtest/gtest.h>
 #include <pthread.h>
@@ -19,6 +22,7 @@
 
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/proxy/proxy.h"
+#include "palpa/sampler/trilinear.h"
 #include "palpa/servo/servo_loop.h"
 #include "sphere_fixture.h"
 
@@ -246,6 +250,49 @@ TEST(AllocFreeTick, PacedRunAllocatesNothing) {
   EXPECT_EQ(g_locks.load(), 0);
 }
 
+TEST(AllocFreeTick, MillionProxyTicksInContactAndFreeSpaceAllocateNothing) {
+  // The real-time core on its own (issue 6): 1,000,000 proxy ticks, the 10 s press, slide and
+  // leave over the sphere at 1 kHz cycled 100 times (free space, first contact, sliding, leaving), with
+  // the passivity observer, armed throughout. The HIP positions are converted before arming.
+  const SphereField field;
+  const sampler::TrilinearSampler sampler(field.view());
+  const proxy::GridFrame frame = proxy::GridFrame::Of(field.view());
+  const proxy::ProxyParams params = Params(field.voxel_m());
+  // The trace has a sample every 10 ms; the ticks are 1 ms apart, so interpolate 10 per interval.
+  const auto trace = firmware_test::PressSlideLeaveTrace(field);
+  std::vector<sampler::GridPos> hips;
+  for (std::size_t i = 0; i + 1 < trace.size(); ++i) {
+    for (int k = 0; k < 10; ++k) {
+      std::array<double, 3> x{};
+      for (std::size_t a = 0; a < 3; ++a)
+        x[a] = trace[i].hip_m[a] + (trace[i + 1].hip_m[a] - trace[i].hip_m[a]) * k / 10.0;
+      hips.push_back(frame.ToGrid(x));
+    }
+  }
+  ASSERT_EQ(hips.size(), 10000u);
+  proxy::ProxyState state;
+  proxy::PassivityObserver observer;
+  long contact = 0, free_ticks = 0, samples = 0;
+  ResetCounters();
+  {
+    const Armed armed;
+    for (int t = 0; t < 1'000'000; ++t) {
+      const sampler::GridPos hip = hips[static_cast<std::size_t>(t) % hips.size()];
+      const proxy::TickResult r = proxy::ProxyTick(sampler, params, state, hip);
+      observer.Update(hip, r, params);
+      contact += r.contact ? 1 : 0;
+      free_ticks += r.contact ? 0 : 1;
+      samples += r.iterations;
+    }
+  }
+  EXPECT_GT(contact, 300'000) << "the ticks must include contact";
+  EXPECT_GT(free_ticks, 300'000) << "and free space";
+  EXPECT_LE(samples, 1'000'000L * params.max_iterations);
+  EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(g_frees.load(), 0);
+  EXPECT_EQ(g_locks.load(), 0);
+}
+
 // The detector itself: without these passing, a 0 above proves nothing.
 TEST(AllocFreeTick, CounterSeesMallocAndNew) {
   ResetCounters();
@@ -279,6 +326,25 @@ TEST(AllocFreeTick, CounterSeesMutexLock) {
     const std::lock_guard<std::mutex> lock(m);
   }
   EXPECT_GE(g_locks.load(), 1);
+}
+
+// Registered to fail: the same armed loop as above with an allocation in it (a std::vector that
+// grows, as a careless edit of the tick might add). Disabled here; ctest runs it expecting failure.
+TEST(DISABLED_MustFail, AllocationInsideArmedProxyTicks) {
+  const SphereField field;
+  const sampler::TrilinearSampler sampler(field.view());
+  const proxy::ProxyParams params = Params(field.voxel_m());
+  const proxy::GridFrame frame = proxy::GridFrame::Of(field.view());
+  const sampler::GridPos hip = frame.ToGrid(field.PointAt(field.radius_m() - 1e-3, {0, 0, 1}));
+  proxy::ProxyState state;
+  ResetCounters();
+  {
+    const Armed armed;
+    std::vector<proxy::TickResult> history;  // the injected fault
+    for (int t = 0; t < 1000; ++t) history.push_back(proxy::ProxyTick(sampler, params, state, hip));
+  }
+  EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(g_frees.load(), 0);
 }
 
 TEST(AllocFreeTick, CounterIgnoresCallsWhenDisarmed) {

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <type_traits>
 
 #include "palpa/fixed/q.h"
@@ -18,7 +19,6 @@ static_assert(Narrow<16>(Mul(Q16::FromDouble(1.5), Q16::FromDouble(2.0)), Round:
 static_assert(ShiftRight(-3, 1, Round::kFloor) == -2);
 static_assert(ShiftRight(-3, 1, Round::kNearest) == -2);  // −1.5 → −2 (ties away from zero)
 static_assert(ShiftRight(3, 1, Round::kNearest) == 2);
-static_assert(ISqrt(0) == 0 && ISqrt(1) == 1 && ISqrt(15) == 3 && ISqrt(16) == 4);
 
 TEST(Fixed, NarrowSaturatesInsteadOfWrapping) {
   const Q16 big = Q16::FromInt(30000);
@@ -37,12 +37,55 @@ TEST(Fixed, RoundingIsSymmetric) {
   }
 }
 
+static_assert(ISqrtBitwise(0) == 0 && ISqrtBitwise(15) == 3 && ISqrtBitwise(16) == 4);
+static_assert(ISqrtBitwise(INT64_MAX) == 3037000499ULL);
+
+bool IsFloorSqrt(std::int64_t v, std::uint64_t r) {
+  const auto u = static_cast<std::uint64_t>(v);
+  return r * r <= u && (r + 1) * (r + 1) > u;
+}
+
 TEST(Fixed, ISqrtIsFloorOfSquareRoot) {
-  for (std::int64_t v : {2LL, 3LL, 99LL, 100LL, 101LL, (1LL << 40) + 12345, (1LL << 62) - 1, 3LL << 60}) {
-    const std::uint64_t r = ISqrt(v);
-    EXPECT_LE(r * r, static_cast<std::uint64_t>(v)) << v;
-    EXPECT_GT((r + 1) * (r + 1), static_cast<std::uint64_t>(v)) << v;
+  // Every value below 2^20, squares and their neighbours at every scale, and random values of
+  // every bit length, against the definition and the bit-by-bit reference.
+  for (std::int64_t v = 0; v < (1 << 20); ++v) ASSERT_EQ(ISqrt(v), ISqrtBitwise(v)) << v;
+  for (std::int64_t r = 1; r < 3037000499LL; r = r * 3 / 2 + 1) {
+    for (std::int64_t v : {r * r - 1, r * r, r * r + 1, r * r + 2 * r}) {
+      ASSERT_TRUE(IsFloorSqrt(v, ISqrt(v))) << v;
+      ASSERT_EQ(ISqrt(v), ISqrtBitwise(v)) << v;
+    }
   }
+  std::mt19937_64 rng(1);
+  for (int bits = 1; bits <= 63; ++bits) {
+    for (int t = 0; t < 2000; ++t) {
+      const auto v = static_cast<std::int64_t>(rng() >> (64 - bits));
+      ASSERT_TRUE(IsFloorSqrt(v, ISqrt(v))) << v;
+    }
+  }
+  for (std::int64_t v :
+       {std::int64_t{(1LL << 62) - 1}, std::int64_t{1LL << 62}, std::int64_t{3LL << 60}, std::int64_t{INT64_MAX}})
+    EXPECT_TRUE(IsFloorSqrt(v, ISqrt(v))) << v;
+  EXPECT_EQ(ISqrt(-5), 0u);
+  EXPECT_EQ(ISqrt(INT64_MAX), 3037000499ULL);
+}
+
+TEST(Fixed, FloorDivIsExact) {
+  // Against the hardware's exact integer division, at every scale the loop uses (quotients up
+  // to 2^50), and at exact multiples and their neighbours where a double estimate rounds across.
+  std::mt19937_64 rng(2);
+  for (int bits_d = 1; bits_d < 62; bits_d += 3) {
+    for (int t = 0; t < 3000; ++t) {
+      const auto d = static_cast<std::int64_t>((rng() >> (64 - bits_d)) | 1);
+      const std::int64_t q_max = std::min<std::int64_t>((std::int64_t{1} << 61) / d, std::int64_t{1} << 50);
+      const auto q = static_cast<std::int64_t>(rng() % static_cast<std::uint64_t>(q_max + 1));
+      for (std::int64_t n : {q * d - 1, q * d, q * d + 1, q * d + d - 1}) {
+        if (n < 0) continue;
+        ASSERT_EQ(FloorDiv(n, d), n / d) << n << " / " << d;
+      }
+    }
+  }
+  EXPECT_EQ(FloorDiv(std::int64_t{1} << 56, std::int64_t{1} << 28), std::int64_t{1} << 28);
+  EXPECT_EQ(FloorDiv(0, 7), 0);
 }
 
 TEST(Fixed, DivRoundTiesAwayFromZero) {

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 
@@ -13,57 +14,77 @@ namespace {
 constexpr double kVoxel = 0.0002;  // 0.2 mm, the kitten's voxel at 300 cells
 constexpr std::uint32_t kN = 100;
 constexpr double kRadiusVoxels = 40;  // 8 mm sphere
+constexpr double kK = 800;            // N/m, the ProxyConfig default
+constexpr std::int32_t kOne = 1 << 16;
 
-struct SphereWorld {
-  std::vector<std::byte> bytes = testing::SphereBlob(kN, kVoxel, 6, kRadiusVoxels);
-  blob::FieldView view = blob::Verify(bytes).value();
-  sampler::TrilinearSampler field{view};
-  GridFrame frame = GridFrame::Of(view);
-  ProxyParams params = MakeProxyParams(ProxyConfig{}, kVoxel).value();
-};
+using Vec3 = std::array<double, 3>;
 
-std::array<double, 3> Unit(std::mt19937& rng) {
+double Norm(const Vec3& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
+Vec3 Sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+double Dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+double AngleDeg(const Vec3& a, const Vec3& b) {
+  return std::acos(std::clamp(Dot(a, b) / (Norm(a) * Norm(b)), -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+Vec3 Unit(std::mt19937& rng) {
   std::normal_distribution<double> g;
-  double d[3] = {g(rng), g(rng), g(rng)};
-  const double l = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  const Vec3 d = {g(rng), g(rng), g(rng)};
+  const double l = Norm(d);
   return {d[0] / l, d[1] / l, d[2] / l};
 }
 
-double Norm(const std::array<double, 3>& v) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
-
-std::array<double, 3> ForceN(const TickResult& r) {
+Vec3 ForceN(const TickResult& r) {
   return {r.force[0].value.ToDouble(), r.force[1].value.ToDouble(), r.force[2].value.ToDouble()};
 }
 
-// The sphere is centred at the device origin; radius R = 8 mm.
+// An analytic world: a blob, its sampler and frame, and default parameters.
+struct World {
+  explicit World(std::vector<std::byte> b, ProxyConfig config = {})
+      : bytes(std::move(b)),
+        view(blob::Verify(bytes).value()),
+        field(view),
+        frame(GridFrame::Of(view)),
+        params(MakeProxyParams(config, view.voxel_m).value()) {}
+  std::vector<std::byte> bytes;
+  blob::FieldView view;
+  sampler::TrilinearSampler field;
+  GridFrame frame;
+  ProxyParams params;
+
+  double PhiVoxels(GridPos p) const { return field.Phi(p) / 65536.0; }
+};
+
+// The sphere is centred at the device origin (AnalyticBlob centres the grid); radius R = 8 mm.
+World Sphere(ProxyConfig config = {}) { return World(testing::SphereBlob(kN, kVoxel, 6, kRadiusVoxels), config); }
+
 TEST(Proxy, PushTwoMillimetresIntoASphere) {
-  SphereWorld w;
+  World w = Sphere();
   const double radius_m = kRadiusVoxels * kVoxel;
   std::mt19937 rng(3);
   for (int trial = 0; trial < 20; ++trial) {
     const auto d = Unit(rng);
     ProxyState state;
     TickResult r;
-    // Approach from 3 mm outside to 2 mm inside over 500 ticks (1 m/s at 1 kHz would be 5 ticks;
-    // this is a slow press), then hold for 50 ticks.
+    // Approach from 3 mm outside to 2 mm inside over 500 ticks (a slow press), then hold 50 ticks.
     for (int t = 0; t <= 550; ++t) {
       const double depth = -0.003 + 0.005 * std::min(t, 500) / 500.0;
       const double rr = radius_m - depth;
       r = ProxyTick(w.field, w.params, state, w.frame.ToGrid({rr * d[0], rr * d[1], rr * d[2]}));
+      ASSERT_LE(r.iterations, w.params.max_iterations);
       // Never inside: φ(proxy) ≥ −0.05 voxel.
-      ASSERT_GE(w.field.At(r.proxy).phi, -(1 << 16) / 20) << "trial " << trial << " tick " << t;
+      ASSERT_GE(w.PhiVoxels(r.proxy), -0.05) << "trial " << trial << " tick " << t;
     }
     ASSERT_TRUE(r.contact);
+    EXPECT_TRUE(r.converged);
     const auto f = ForceN(r);
-    const double expected = 800 * 0.002;
-    EXPECT_NEAR(Norm(f), expected, 0.05 * expected) << "trial " << trial;
-    const double cosang = (f[0] * d[0] + f[1] * d[1] + f[2] * d[2]) / Norm(f);
-    EXPECT_LE(std::acos(std::min(1.0, cosang)) * 180 / std::numbers::pi, 2.0) << "trial " << trial;
+    const double expected = kK * 0.002;
+    EXPECT_NEAR(Norm(f), expected, 0.01 * expected) << "trial " << trial;
+    EXPECT_LE(AngleDeg(f, d), 0.5) << "trial " << trial;
   }
 }
 
 TEST(Proxy, FreeSpaceGivesExactlyZeroForceAndProxyAtHip) {
-  SphereWorld w;
+  World w = Sphere();
   std::mt19937 rng(5);
   // Fresh proxy at random free-space points ≥ 1.5 voxels outside.
   for (int t = 0; t < 1000; ++t) {
@@ -84,21 +105,53 @@ TEST(Proxy, FreeSpaceGivesExactlyZeroForceAndProxyAtHip) {
     const GridPos hip = w.frame.ToGrid({rr * std::cos(a), rr * std::sin(a), 0.0});
     const TickResult r = ProxyTick(w.field, w.params, state, hip);
     ASSERT_FALSE(r.contact) << t;
+    ASSERT_EQ(r.proxy, hip) << t;
     ASSERT_EQ(r.force[0].value.raw() | r.force[1].value.raw() | r.force[2].value.raw(), 0) << t;
   }
 }
 
+TEST(Proxy, LeavingTheSurfaceReleasesTheProxyAtOnce) {
+  // Pressed 1 mm in, then the HIP jumps 1 mm outside: the proxy rejoins it in the same tick.
+  World w = Sphere();
+  const double r0 = kRadiusVoxels * kVoxel;
+  ProxyState state;
+  for (int t = 0; t <= 100; ++t) {
+    ProxyTick(w.field, w.params, state, w.frame.ToGrid({0, r0 + 1e-3 - 2e-3 * std::min(t, 50) / 50.0, 0}));
+  }
+  ASSERT_TRUE(ProxyTick(w.field, w.params, state, w.frame.ToGrid({0, r0 - 1e-3, 0})).contact);
+  const GridPos out = w.frame.ToGrid({0.0002, r0 + 1e-3, 0.0001});
+  const TickResult r = ProxyTick(w.field, w.params, state, out);
+  EXPECT_FALSE(r.contact);
+  EXPECT_EQ(r.proxy, out);
+}
+
+TEST(Proxy, StartedInsideFollowsTheHipWithoutForceUntilItHasBeenOutside) {
+  World w = Sphere();
+  const double r0 = kRadiusVoxels * kVoxel;
+  ProxyState state;
+  for (int t = 0; t < 20; ++t) {
+    const GridPos hip = w.frame.ToGrid({0, 0, r0 - 2e-3 + 1e-5 * t});
+    const TickResult r = ProxyTick(w.field, w.params, state, hip);
+    EXPECT_FALSE(r.contact);
+    EXPECT_EQ(r.proxy, hip);
+  }
+  ProxyTick(w.field, w.params, state, w.frame.ToGrid({0, 0, r0 + 1e-3}));  // out once
+  TickResult r;
+  for (int t = 0; t <= 20; ++t) r = ProxyTick(w.field, w.params, state, w.frame.ToGrid({0, 0, r0 + 1e-3 - 1e-4 * t}));
+  EXPECT_TRUE(r.contact);  // 1 mm in
+  EXPECT_NEAR(Norm(ForceN(r)), kK * 1e-3, 0.01 * kK * 1e-3);
+}
+
 TEST(Proxy, ForceClampKeepsDirection) {
-  SphereWorld w;
   ProxyConfig config;
   config.max_force_n = 2.0;
-  const ProxyParams params = MakeProxyParams(config, kVoxel).value();
+  World w = Sphere(config);
   ProxyState state;
   TickResult r;
   // Press 4 mm along +x: k·4 mm = 3.2 N > 2 N.
   for (int t = 0; t <= 600; ++t) {
     const double rr = kRadiusVoxels * kVoxel + 0.002 - 0.006 * std::min(t, 500) / 500.0;
-    r = ProxyTick(w.field, params, state, w.frame.ToGrid({rr, 0, 0}));
+    r = ProxyTick(w.field, w.params, state, w.frame.ToGrid({rr, 0, 0}));
   }
   ASSERT_TRUE(r.clamped);
   const auto f = ForceN(r);
@@ -108,39 +161,329 @@ TEST(Proxy, ForceClampKeepsDirection) {
   EXPECT_NEAR(f[2], 0, 1e-3);
 }
 
-TEST(Proxy, ThinPlateStopsAFastHipOnTheEntrySide) {
-  // A plate 2 voxels thick (|z − c| − 1 ≤ 0), crossed at 2 m/s at 1 kHz (10 voxels a tick).
-  const std::uint32_t n = 40;
-  const double c = 0.5 * (n - 1);
-  const auto bytes =
-      testing::AnalyticBlob({n, n, n}, kVoxel, 6, [=](double, double, double k) { return std::abs(k - c) - 1.0; });
-  const auto view = blob::Verify(bytes).value();
-  const sampler::TrilinearSampler field(view);
-  const GridFrame frame = GridFrame::Of(view);
-  const ProxyParams params = MakeProxyParams(ProxyConfig{}, kVoxel).value();
-  std::mt19937 rng(9);
-  std::uniform_real_distribution<double> lateral(-0.002, 0.002);
-  int tunnelled = 0;
-  for (int pass = 0; pass < 200; ++pass) {
-    ProxyState state;
-    const double x = lateral(rng), y = lateral(rng);
-    TickResult r;
-    for (int t = 0; t <= 6; ++t) {
-      r = ProxyTick(field, params, state, frame.ToGrid({x, y, 0.003 - 0.002 * t}));  // 2 mm per tick
-    }
-    // Entry side is z > 0: the proxy must still be there.
-    if (frame.ToMetres(r.proxy)[2] < 0) ++tunnelled;
+// Sliding: a HIP held `depth` inside the 8 mm sphere moves along a great circle for 1 s. Checked
+// against the sphere's closed form every tick: the proxy on the surface, |f| vs k·(R − |X_h|)
+// and its direction vs the radial direction at the HIP.
+struct SlideFigures {
+  double max_abs_phi_voxels = 0;
+  double rms_force_error = 0;  // relative
+  double max_force_error = 0;  // relative
+  double max_angle_deg = 0;
+  double min_energy_margin_j = 1e9;  // min over ticks of E_n + B_n (passivity observer)
+  double min_energy_j = 1e9;         // min over ticks of E_n
+  double max_zoh_bound_j = 0;
+  int max_iterations = 0;
+  int ticks = 0;
+};
+
+SlideFigures SlideOnSphere(World& w, double depth_m, double speed_m_s, const Vec3& axis_a, const Vec3& axis_b) {
+  const double r0 = kRadiusVoxels * kVoxel;
+  const double rh = r0 - depth_m;
+  const auto hip_at = [&](double angle, double radius) {
+    return Vec3{radius * (std::cos(angle) * axis_a[0] + std::sin(angle) * axis_b[0]),
+                radius * (std::cos(angle) * axis_a[1] + std::sin(angle) * axis_b[1]),
+                radius * (std::cos(angle) * axis_a[2] + std::sin(angle) * axis_b[2])};
+  };
+  ProxyState state;
+  PassivityObserver po;
+  SlideFigures out;
+  // 200 ms press from 1 mm outside to `depth`, 1 s slide at `speed` (angular speed at the surface).
+  const int press = 200, slide = 1000;
+  double sum_sq = 0;
+  for (int t = 0; t <= press + slide; ++t) {
+    const double u = std::min(1.0, t / static_cast<double>(press));
+    const double radius = (r0 + 1e-3) + (rh - r0 - 1e-3) * u;
+    const double angle = t > press ? speed_m_s * 1e-3 * (t - press) / r0 : 0.0;
+    const Vec3 hip_m = hip_at(angle, radius);
+    const GridPos hip = w.frame.ToGrid(hip_m);
+    const TickResult r = ProxyTick(w.field, w.params, state, hip);
+    po.Update(hip, r, w.params);
+    out.max_iterations = std::max(out.max_iterations, r.iterations);
+    out.min_energy_margin_j = std::min(out.min_energy_margin_j, po.EnergyJ(kVoxel) + po.ZohBoundJ(kVoxel));
+    out.min_energy_j = std::min(out.min_energy_j, po.EnergyJ(kVoxel));
+    out.max_zoh_bound_j = po.ZohBoundJ(kVoxel);
+    if (t <= press) continue;
+    ++out.ticks;
+    EXPECT_TRUE(r.contact) << t;
+    out.max_abs_phi_voxels = std::max(out.max_abs_phi_voxels, std::abs(w.PhiVoxels(r.proxy)));
+    const Vec3 hip_exact = w.frame.ToMetres(hip);  // the HIP as the loop saw it
+    const double penetration = r0 - Norm(hip_exact);
+    const auto f = ForceN(r);
+    const double err = (Norm(f) - kK * penetration) / (kK * penetration);
+    sum_sq += err * err;
+    out.max_force_error = std::max(out.max_force_error, std::abs(err));
+    out.max_angle_deg = std::max(out.max_angle_deg, AngleDeg(f, hip_exact));
   }
-  EXPECT_EQ(tunnelled, 0);
+  out.rms_force_error = std::sqrt(sum_sq / out.ticks);
+  return out;
+}
+
+Vec3 RandomGreatCircleAxis(std::mt19937& rng, const Vec3& a) {
+  Vec3 b = Unit(rng);
+  const double ab = Dot(a, b);
+  b = {b[0] - ab * a[0], b[1] - ab * a[1], b[2] - ab * a[2]};
+  const double bl = Norm(b);
+  return {b[0] / bl, b[1] / bl, b[2] / bl};
+}
+
+TEST(Proxy, SlidingTwoMillimetresDeepTracksTheSphere) {
+  // Issue 6: a HIP held 2 mm deep, moved tangentially for 1 s: |φ(proxy)| ≤ 0.05 voxel at the
+  // end of every tick, |f| within 2 % of k·penetration (RMS), direction within 1°; and the
+  // passivity observer never below the zero-order-hold bound. Asserted at 0.02 m/s (palpa trace
+  // synth's default) and 0.05 m/s; 0.1 and 0.25 m/s are measured and bounded more loosely: the
+  // proxy's tangential reach per sample is about 1.5δ/Λ (docs/realtime-core.md), so a fast stroke
+  // lags a little, it never leaps.
+  World w = Sphere();
+  std::mt19937 rng(21);
+  for (const double speed : {0.02, 0.05, 0.1, 0.25}) {
+    for (int trial = 0; trial < 2; ++trial) {
+      const Vec3 a = Unit(rng);
+      const SlideFigures s = SlideOnSphere(w, 0.002, speed, a, RandomGreatCircleAxis(rng, a));
+      std::printf(
+          "[ measured ] slide 2 mm deep at %.2f m/s: max |phi(proxy)| %.4f voxel, |f| error RMS %.3f %% (max %.3f %%), "
+          "direction max %.3f deg, samples/tick max %d; passivity: min E %.2e J, min E+B %.2e J (B %.2e J)\n",
+          speed, s.max_abs_phi_voxels, 100 * s.rms_force_error, 100 * s.max_force_error, s.max_angle_deg,
+          s.max_iterations, s.min_energy_j, s.min_energy_margin_j, s.max_zoh_bound_j);
+      EXPECT_LE(s.max_iterations, w.params.max_iterations);
+      EXPECT_GE(s.min_energy_margin_j, -1e-9) << "passivity observer below the zero-order-hold bound";
+      if (speed <= 0.05) {
+        EXPECT_LE(s.max_abs_phi_voxels, 0.05);
+        EXPECT_LE(s.rms_force_error, 0.02);
+        EXPECT_LE(s.max_angle_deg, 1.0);
+      } else {
+        EXPECT_LE(s.max_abs_phi_voxels, 0.05);
+        EXPECT_LE(s.rms_force_error, 0.02);
+        EXPECT_LE(s.max_angle_deg, 5.0);
+      }
+    }
+  }
+}
+
+TEST(Proxy, FrictionConeSticksBelowAndSlidesAbove) {
+  // A plane z = 20 (normal +z). Pressed 1 mm (5 voxels) in, the HIP then moves along x. With
+  // μs = 0.5 the proxy must not move while the HIP's tangential offset is below μs·depth
+  // (2.5 voxels); beyond it, it slides and trails at the dynamic cone's edge, so |f_t|/|f_n| = μd.
+  const std::uint32_t n = 48;
+  ProxyConfig config;
+  config.mu_static = 0.5;
+  config.mu_dynamic = 0.3;
+  World w(testing::AnalyticBlob({n, n, n}, kVoxel, 6, [](double, double, double k) { return k - 20.0; }), config);
+  const double surface_m = w.view.origin_m[2] + 20 * kVoxel;
+  const auto at = [&](double x_m, double z_m) { return w.frame.ToGrid({x_m, 0.0, z_m}); };
+  ProxyState state;
+  TickResult r;
+  for (int t = 0; t <= 100; ++t)
+    r = ProxyTick(w.field, w.params, state, at(0, surface_m + 1e-3 - 2e-3 * std::min(t, 50) / 50));
+  ASSERT_TRUE(r.contact);
+  const GridPos stuck = r.proxy;
+  // Below the cone: tangential offset up to 0.9·μs·depth, in 0.02 mm steps.
+  const double depth_m = 1e-3;
+  for (double x = 0; x <= 0.9 * 0.5 * depth_m; x += 2e-5) {
+    r = ProxyTick(w.field, w.params, state, at(x, surface_m - depth_m));
+    ASSERT_TRUE(r.contact);
+    ASSERT_EQ(r.proxy.x, stuck.x) << "stuck proxy moved at x = " << x;
+  }
+  // Above it: keep moving to 5 mm. The proxy slips back to the dynamic cone's edge (|f_t|/|f_n| =
+  // μd right after each slip), sticks again until the static cone's edge (μs): Coulomb stick-slip.
+  double min_ratio = 1e9, max_ratio = 0;
+  for (double x = 0.46e-3; x <= 5e-3; x += 2e-5) {
+    r = ProxyTick(w.field, w.params, state, at(x, surface_m - depth_m));
+    ASSERT_TRUE(r.contact);
+    const auto f = ForceN(r);
+    ASSERT_LT(f[0], 0) << "friction opposes the motion";
+    min_ratio = std::min(min_ratio, -f[0] / f[2]);
+    max_ratio = std::max(max_ratio, -f[0] / f[2]);
+  }
+  EXPECT_GT(w.frame.ToMetres(r.proxy)[0], 2e-3) << "the proxy slides";
+  std::printf("[ measured ] friction: sliding |f_t|/|f_n| in [%.4f, %.4f] (mu_d 0.3, mu_s 0.5)\n", min_ratio,
+              max_ratio);
+  EXPECT_NEAR(min_ratio, 0.3, 0.01);
+  EXPECT_LE(max_ratio, 0.5 + 0.01);
+  // Friction off (the default): the same path leaves no tangential force once the HIP stops.
+  World plain(testing::AnalyticBlob({n, n, n}, kVoxel, 6, [](double, double, double k) { return k - 20.0; }));
+  ProxyState s2;
+  for (int t = 0; t <= 100; ++t)
+    r = ProxyTick(plain.field, plain.params, s2, at(0, surface_m + 1e-3 - 2e-3 * std::min(t, 50) / 50));
+  for (int t = 0; t <= 20; ++t) r = ProxyTick(plain.field, plain.params, s2, at(1e-3, surface_m - depth_m));
+  EXPECT_NEAR(ForceN(r)[0], 0, 1e-3);
+}
+
+// A plate 2 voxels thick, |n·x − c| ≤ 1 (node units), on a 64³ grid with 0.2 mm voxels; n is a
+// random unit vector within `tilt_deg` of z, and the mid-plane passes within half a voxel of the
+// grid centre at a random sub-voxel offset.
+struct Plate {
+  Vec3 n;
+  double c;
+  World world;
+};
+
+constexpr std::uint32_t kPlateN = 64;
+constexpr double kPlateCentre = 0.5 * (kPlateN - 1);
+
+Plate MakePlate(std::mt19937& rng, double tilt_deg) {
+  std::uniform_real_distribution<double> u(0, 1);
+  const double tilt = tilt_deg * std::numbers::pi / 180 * u(rng), az = 2 * std::numbers::pi * u(rng);
+  const Vec3 n = {std::sin(tilt) * std::cos(az), std::sin(tilt) * std::sin(az), std::cos(tilt)};
+  const double c = kPlateCentre * (n[0] + n[1] + n[2]) + u(rng) - 0.5;
+  return {n, c, World(testing::AnalyticBlob({kPlateN, kPlateN, kPlateN}, kVoxel, 6, [=](double i, double j, double k) {
+            return std::abs(n[0] * i + n[1] * j + n[2] * k - c) - 1.0;
+          }))};
+}
+
+struct PassResult {
+  int passes = 0;
+  int tunnelled = 0;
+  double min_phi_voxels = 1e9;
+  int max_iterations = 0;
+};
+
+// Drives the HIP in straight lines from 2 mm on the entry side (n·x > c) to 2 mm past the far
+// side, at `speed` m/s sampled at 1 kHz, through random points near the grid centre in random
+// directions within 60° of −n. A pass tunnels if the proxy ends on the far side.
+PassResult DrivePlatePasses(Plate& plate, double speed, int passes, std::mt19937& rng) {
+  World& w = plate.world;
+  std::uniform_real_distribution<double> u(-1, 1);
+  PassResult out;
+  const Vec3& n = plate.n;
+  const Vec3 origin = w.view.origin_m;
+  const auto plane_m = [&](const Vec3& x_m) {  // signed distance to the plate's mid-plane, m
+    return Dot(n, Sub(x_m, origin)) - plate.c * kVoxel;
+  };
+  while (out.passes < passes) {
+    Vec3 d = {u(rng), u(rng), u(rng)};
+    const double dl = Norm(d);
+    if (dl > 1 || dl < 0.1) continue;
+    d = {d[0] / dl, d[1] / dl, d[2] / dl};
+    if (Dot(d, n) > 0) d = {-d[0], -d[1], -d[2]};
+    if (Dot(d, n) > -0.5) continue;  // within 60° of −n
+    const Vec3 centre = {origin[0] + (kPlateCentre + 3 * u(rng)) * kVoxel,
+                         origin[1] + (kPlateCentre + 3 * u(rng)) * kVoxel,
+                         origin[2] + (kPlateCentre + 3 * u(rng)) * kVoxel};
+    const double to_plane = plane_m(centre);
+    const Vec3 on = {centre[0] - to_plane * n[0], centre[1] - to_plane * n[1], centre[2] - to_plane * n[2]};
+    const double reach = 2e-3 / -Dot(d, n);  // path length from 2 mm above to the mid-plane
+    const Vec3 start = {on[0] - reach * d[0], on[1] - reach * d[1], on[2] - reach * d[2]};
+    const int ticks = static_cast<int>(std::ceil(2 * reach / (speed * 1e-3)));
+    ProxyState state;
+    TickResult r;
+    for (int t = 0; t <= ticks; ++t) {
+      const double s = std::min(2 * reach, speed * 1e-3 * t);
+      r = ProxyTick(w.field, w.params, state,
+                    w.frame.ToGrid({start[0] + s * d[0], start[1] + s * d[1], start[2] + s * d[2]}));
+      out.min_phi_voxels = std::min(out.min_phi_voxels, w.PhiVoxels(r.proxy));
+      out.max_iterations = std::max(out.max_iterations, r.iterations);
+    }
+    ++out.passes;
+    if (plane_m(w.frame.ToMetres(r.proxy)) < 0) ++out.tunnelled;
+  }
+  return out;
+}
+
+TEST(Proxy, ThinPlateIsNeverTunnelledAtHalfAndTwoMetresPerSecond) {
+  // 10,000 randomized passes per speed: 20 plates (random tilt up to 45°, random offset) × 500.
+  std::mt19937 rng(9);
+  for (const double speed : {0.5, 2.0}) {
+    PassResult total;
+    for (int p = 0; p < 20; ++p) {
+      Plate plate = MakePlate(rng, 45.0);
+      const PassResult r = DrivePlatePasses(plate, speed, 500, rng);
+      total.passes += r.passes;
+      total.tunnelled += r.tunnelled;
+      total.min_phi_voxels = std::min(total.min_phi_voxels, r.min_phi_voxels);
+      total.max_iterations = std::max(total.max_iterations, r.max_iterations);
+    }
+    std::printf("[ measured ] 2-voxel plate at %.1f m/s: %d tunnelled of %d passes, min phi(proxy) %.4f voxel\n", speed,
+                total.tunnelled, total.passes, total.min_phi_voxels);
+    EXPECT_EQ(total.passes, 10000);
+    EXPECT_EQ(total.tunnelled, 0);
+    EXPECT_GE(total.min_phi_voxels, -0.125 - 1e-4);  // rests at φ ≥ −δ/2
+  }
+}
+
+TEST(Proxy, HeldHipConvergesWithoutSampling) {
+  World w = Sphere();
+  ProxyState state;
+  TickResult r;
+  const double r0 = kRadiusVoxels * kVoxel;
+  for (int t = 0; t <= 300; ++t) {
+    r = ProxyTick(w.field, w.params, state, w.frame.ToGrid({0.001, 0.002, r0 - 1e-3 * std::min(t, 100) / 100.0}));
+  }
+  EXPECT_TRUE(r.contact);
+  EXPECT_TRUE(r.converged);
+  EXPECT_EQ(r.iterations, 0);  // φ and ∇φ at the proxy are carried over; nothing to sample
+}
+
+// The fixed-point tick is integer-only, so its output bits are a function of its input bits
+// alone: this golden (FNV-1a over every output of a scripted press, slide, leave and plate
+// crossing, fed with integer grid positions) must match on x86-64, aarch64 and armhf. It changes
+// only when the algorithm does, and then deliberately: the test prints the new value (update it
+// here, and re-bless the HIL goldens, hil/, with `palpa hil bless`).
+std::uint64_t TickHash(std::uint64_t h, const TickResult& r) {
+  const std::int64_t words[] = {r.proxy.x,
+                                r.proxy.y,
+                                r.proxy.z,
+                                r.force[0].value.raw(),
+                                r.force[1].value.raw(),
+                                r.force[2].value.raw(),
+                                r.penetration_q16,
+                                r.contact,
+                                r.clamped,
+                                r.converged,
+                                r.iterations};
+  for (const std::int64_t w : words) {
+    for (int b = 0; b < 8; ++b) {
+      h ^= static_cast<std::uint8_t>(static_cast<std::uint64_t>(w) >> (8 * b));
+      h *= 0x100000001b3ULL;
+    }
+  }
+  return h;
+}
+
+std::uint64_t ScriptedRunHash() {
+  World w = Sphere();
+  const std::int32_t c = (kN - 1) << 15;  // grid centre, Q16.16
+  const std::int32_t r0 = static_cast<std::int32_t>(kRadiusVoxels * 65536);
+  ProxyState state;
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  for (std::int32_t t = 0; t < 3000; ++t) {
+    // Integer inputs only (no libm): press along +z from 3 voxels out to 8 in, slide along y on
+    // a straight line (the sphere curves away beneath it), then leave.
+    const std::int32_t depth = t < 300    ? -3 * 65536 + t * 11 * 65536 / 300
+                               : t < 2500 ? 8 * 65536
+                                          : 8 * 65536 - (t - 2500) * 2000;
+    const std::int32_t y = t < 300 ? 0 : (t - 300) * 900;  // 0.014 voxel a tick, 30 voxels in all
+    const GridPos hip{c, c + y, c + r0 - depth};
+    h = TickHash(h, ProxyTick(w.field, w.params, state, hip));
+  }
+  return h;
+}
+
+TEST(Proxy, OutputBitsAreAFunctionOfInputBitsGolden) {
+  const std::uint64_t h = ScriptedRunHash();
+  std::printf("[ measured ] scripted run hash 0x%016llx\n", static_cast<unsigned long long>(h));
+  EXPECT_EQ(h, ScriptedRunHash()) << "not even deterministic on one machine";
+  EXPECT_EQ(h, 0xf16134f60c4393e1ULL) << "golden changed: the tick's arithmetic or control flow changed";
 }
 
 TEST(ProxyParams, RejectsOutOfRangeValuesAtStartUp) {
   EXPECT_FALSE(MakeProxyParams({.k_n_per_m = -1}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.k_n_per_m = 1e9}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.max_force_n = 0}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.max_force_n = 101}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.gamma = 1.5}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.beta = 0}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.max_iterations = 1}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.max_iterations = 65}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.mu_static = -0.1}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.mu_static = 0.3, .mu_dynamic = 0.4}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.depth_tolerance_voxels = 0.6}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.k_n_per_m = NAN}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.k_n_per_m = 1}, 1e-4).has_value());  // k·h = 1e-4 N/voxel: too coarse
+  EXPECT_FALSE(MakeProxyParams({}, 0.0).has_value());
   EXPECT_TRUE(MakeProxyParams({}, kVoxel).has_value());
+  EXPECT_TRUE(MakeProxyParams({.mu_static = 0.5, .mu_dynamic = 0.3}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.max_iterations = 4, .settle_samples = 5}, kVoxel).has_value());
+  EXPECT_FALSE(MakeProxyParams({.max_iterations = 4, .gradient_samples = 0}, kVoxel).has_value());
 }
 
 }  // namespace

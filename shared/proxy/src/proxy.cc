@@ -1,37 +1,118 @@
 #include "palpa/proxy/proxy.h"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
-#include <cstdlib>
+#include <cstring>
 #include <limits>
 
 namespace palpa::proxy {
 namespace {
 
-using fixed::DivRound;
 using fixed::ISqrt;
-using fixed::Round;
 using fixed::SaturateToInt32;
-using fixed::ShiftRight;
+using sampler::LipschitzBound;
 
-struct Delta {
-  std::int64_t v[3];
-};
+using Vec = std::array<std::int64_t, 3>;
 
-Delta Diff(GridPos to, GridPos from) {
-  return {{std::int64_t{to.x} - from.x, std::int64_t{to.y} - from.y, std::int64_t{to.z} - from.z}};
+// Rounding slack in Q16.16 LSB: a fixed-point φ is within 1 LSB of the exact trilinear value and
+// two enter a certification, and a move's pieces are truncated per axis (≤ 1 LSB each, times the
+// axis bound ≤ 2): 16 covers both with room.
+constexpr std::int64_t kSlack = 16;
+
+// Consecutive rejected steps after which the tick gives up moving (a step 2^-16 of its cap).
+constexpr int kMaxHalvings = 16;
+
+constexpr std::int64_t RoundShift(std::int64_t v, int bits) { return (v + (std::int64_t{1} << (bits - 1))) >> bits; }
+
+Vec Diff(GridPos a, GridPos b) { return {std::int64_t{a.x} - b.x, std::int64_t{a.y} - b.y, std::int64_t{a.z} - b.z}; }
+
+// Positions inside a tick are int64 triples (copying a 3×int32 struct as a block right after
+// writing its fields one by one costs a store-forwarding stall). A grid position is in range.
+Vec Pos(GridPos p) { return {p.x, p.y, p.z}; }
+// Built with x and y in one 8-byte store: callers copy a GridPos as 8 + 4 bytes, and an 8-byte
+// load of two separate 4-byte stores would stall store forwarding.
+GridPos ToGridPos(const Vec& p) {
+  GridPos g;
+  const std::uint64_t xy = static_cast<std::uint32_t>(p[0]) | (std::uint64_t{static_cast<std::uint32_t>(p[1])} << 32);
+  std::memcpy(static_cast<void*>(&g), &xy, sizeof xy);  // GridPos is trivially copyable
+  g.z = static_cast<std::int32_t>(p[2]);
+  return g;
+}
+Vec Sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+// p + d stays within the HIP box grown by a step (|coordinate| < 2^30): the proxy only ever
+// moves towards the clamped HIP or by less than a voxel.
+Vec Plus(const Vec& a, const Vec& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+
+// d / 2^bits per component, rounded towards zero (so never longer than d).
+Vec Halve(const Vec& d, int bits) {
+  if (bits == 0) return d;
+  const std::int64_t div = std::int64_t{1} << bits;
+  return {d[0] / div, d[1] / div, d[2] / div};
 }
 
-std::int64_t Length(const Delta& d) {
-  return static_cast<std::int64_t>(ISqrt(d.v[0] * d.v[0] + d.v[1] * d.v[1] + d.v[2] * d.v[2]));
+std::int64_t Norm2(const Vec& d) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2]; }
+
+std::int64_t MaxAbs(const Vec& d) { return std::max({std::llabs(d[0]), std::llabs(d[1]), std::llabs(d[2])}); }
+
+std::int64_t Dot(const Vec& d, const Vec& g) { return d[0] * g[0] + d[1] * g[1] + d[2] * g[2]; }
+
+// Divides by a power of two until every |component| ≤ 2^bits: keeps the direction (up to
+// truncation towards zero, which never lengthens it) and bounds the products that follow.
+Vec ShrinkTo(const Vec& d, int bits) {
+  const int excess = static_cast<int>(std::bit_width(static_cast<std::uint64_t>(MaxAbs(d)))) - bits;
+  if (excess <= 0) return d;
+  const std::int64_t div = std::int64_t{1} << excess;
+  return {d[0] / div, d[1] / div, d[2] / div};
 }
 
-GridPos Add(GridPos p, const Delta& d) {
-  return {SaturateToInt32(p.x + d.v[0]), SaturateToInt32(p.y + d.v[1]), SaturateToInt32(p.z + d.v[2])};
+// d·num/den per component, rounded towards zero (never longer than exact); 0 ≤ num ≤ den,
+// |d_i| < 2^32. One division: the ratio in Q30, then a multiply per component.
+[[gnu::always_inline]] inline Vec Scale(const Vec& d, std::int64_t num, std::int64_t den) {
+  // num/den ≤ 1; if num ≥ 2^33 both are shifted first so that num << 30 fits.
+  const int excess = std::max(0, static_cast<int>(std::bit_width(static_cast<std::uint64_t>(num))) - 33);
+  const std::int64_t ratio = fixed::FloorDiv((num >> excess) << 30, (den >> excess) + (excess > 0 ? 1 : 0));  // ≤ 2^30
+  const auto scale = [&](std::int64_t v) { return v >= 0 ? (v * ratio) >> 30 : -((-v * ratio) >> 30); };
+  return {scale(d[0]), scale(d[1]), scale(d[2])};
 }
 
-// Scales d to length `len` (raw), given its current length `cur` > 0.
-Delta ScaleTo(const Delta& d, std::int64_t len, std::int64_t cur) {
-  return {{DivRound(d.v[0] * len, cur), DivRound(d.v[1] * len, cur), DivRound(d.v[2] * len, cur)}};
+// Σ|d_i|·max|∂_iφ|, Q32: bounds |φ(a + d) − φ(a)| without a root.
+std::int64_t AxisVariation(const Vec& d, const LipschitzBound& lb) {
+  return std::llabs(d[0]) * lb.axis[0] + std::llabs(d[1]) * lb.axis[1] + std::llabs(d[2]) * lb.axis[2];
+}
+
+// Λ·|d| in Q32: the smaller of the axis bound and the Lipschitz-norm bound. The norm bound costs
+// a root, so it is computed only when the axis bound exceeds `need`.
+std::int64_t Variation(const Vec& d, const LipschitzBound& lb, std::int64_t need) {
+  const std::int64_t axis = AxisVariation(d, lb);
+  // (|d_i| ≥ 2^30 happens only for a free jump far outside the grid, where Norm2 could overflow.)
+  if (axis <= need || !lb.norm_helps || MaxAbs(d) >= (std::int64_t{1} << 30)) return axis;
+  return std::min(axis, std::int64_t{lb.norm} * static_cast<std::int64_t>(ISqrt(Norm2(d))));
+}
+
+// True if the trilinear φ stays above −δ all along [a, a + d], given the sampled φ(a), φ(a + d).
+bool Certified(std::int64_t phi_a, std::int64_t phi_b, const Vec& d, const LipschitzBound& lb, std::int64_t delta) {
+  const std::int64_t s = phi_a + phi_b + 2 * delta - kSlack;
+  if (s < 0) return false;
+  const std::int64_t need = s << 16;
+  return Variation(d, lb, need) <= need;
+}
+
+// Whether every coordinate of h lies within the grid ± kHipMarginQ16 (one unsigned compare each).
+bool InHipBox(GridPos h, const sampler::TrilinearSampler& field) {
+  const auto in = [&](std::int32_t v, std::size_t a) {
+    return static_cast<std::uint32_t>(v) + static_cast<std::uint32_t>(kHipMarginQ16) <=
+           field.last_node(a) + 2u * kHipMarginQ16;
+  };
+  return in(h.x, 0) & in(h.y, 1) & in(h.z, 2);
+}
+
+// The HIP clamped to the grid ± kHipMarginQ16.
+GridPos ClampHip(GridPos h, const sampler::TrilinearSampler& field) {
+  const auto clamp = [&](std::int32_t v, std::size_t a) {
+    return std::clamp<std::int64_t>(v, -std::int64_t{kHipMarginQ16}, std::int64_t{field.last_node(a)} + kHipMarginQ16);
+  };
+  return ToGridPos({clamp(h.x, 0), clamp(h.y, 1), clamp(h.z, 2)});
 }
 
 }  // namespace
@@ -71,95 +152,493 @@ std::expected<ProxyParams, const char*> MakeProxyParams(const ProxyConfig& c, do
     return std::unexpected("max force must be in (0, 100] N");
   if (!(std::isfinite(c.gamma) && c.gamma > 0 && c.gamma <= 1)) return std::unexpected("gamma must be in (0, 1]");
   if (!(std::isfinite(c.beta) && c.beta > 0 && c.beta <= 1)) return std::unexpected("beta must be in (0, 1]");
-  if (c.max_iterations < 1 || c.max_iterations > 256) return std::unexpected("iterations must be in 1..256");
+  if (c.max_iterations < 2 || c.max_iterations > 64) return std::unexpected("iterations must be in 2..64");
+  if (c.gradient_samples < 1 || c.gradient_samples > c.max_iterations)
+    return std::unexpected("gradient samples must be in 1..iterations");
+  if (c.settle_samples < 1 || c.settle_samples > c.max_iterations)
+    return std::unexpected("settle samples must be in 1..iterations");
+  if (!(std::isfinite(c.mu_static) && c.mu_static >= 0 && c.mu_static <= 4))
+    return std::unexpected("static friction coefficient must be in [0, 4]");
+  if (!(std::isfinite(c.mu_dynamic) && c.mu_dynamic >= 0 && c.mu_dynamic <= c.mu_static))
+    return std::unexpected("dynamic friction coefficient must be in [0, mu_static]");
+  if (!(std::isfinite(c.depth_tolerance_voxels) && c.depth_tolerance_voxels > 0 && c.depth_tolerance_voxels <= 0.5))
+    return std::unexpected("depth tolerance must be in (0, 0.5] voxel");
   ProxyParams p;
   p.gamma_q16 = fixed::Q16::FromDouble(c.gamma).raw();
   p.beta_q16 = fixed::Q16::FromDouble(c.beta).raw();
   p.max_iterations = c.max_iterations;
+  p.gradient_samples = c.gradient_samples;
+  p.settle_samples = c.settle_samples;
   p.k = {fixed::Q16::FromDouble(k_per_voxel)};
   p.max_force = {fixed::Q16::FromDouble(c.max_force_n)};
+  p.mu_static_q16 = fixed::Q16::FromDouble(c.mu_static).raw();
+  p.mu_dynamic_q16 = fixed::Q16::FromDouble(c.mu_dynamic).raw();
+  p.depth_tolerance_q16 = fixed::Q16::FromDouble(c.depth_tolerance_voxels).raw();
   p.voxel_m = voxel_m;
   return p;
 }
 
-TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state,
-                     GridPos hip) {
-  TickResult r;
-  GridPos p = state.valid ? state.proxy : hip;
+namespace {
 
-  // Phase 1: free motion by sphere tracing; cannot cross φ = 0.
-  for (int step = 0; step < kMaxTraceSteps && !(p == hip); ++step) {
-    const std::int32_t phi = field.At(p).phi;
-    ++r.iterations;
-    if (phi <= params.contact_eps_q16) break;
-    const Delta d = Diff(hip, p);
-    const std::int64_t len = Length(d);
-    const std::int64_t safe = ShiftRight(std::int64_t{phi} * kInvLipschitzQ16, 16, Round::kFloor);
-    if (safe >= len) {
-      p = hip;
+// The sampled φ and ∇φ at a point, with 1/|∇φ|² (Q24, from one division) for the projections.
+// (Kept in int64 and filled field by field: copying the sample's int32 array as a block would
+// load 8 bytes over two 4-byte stores, a store-forwarding stall.)
+struct Local {
+  std::int64_t phi;
+  std::array<std::int64_t, 3> grad;
+  std::int64_t inv_grad2;  // 0: |∇φ| < 1/4, no normal to project along
+};
+
+Local FromSample(const sampler::Sample& s) {
+  const std::int64_t gx = s.grad[0], gy = s.grad[1], gz = s.grad[2];
+  const std::int64_t gg = gx * gx + gy * gy + gz * gz;
+  // |∇φ|² ≥ 1/16 (Q32: 2^28) keeps 2^56/gg ≤ 2^28 and the projections below in range.
+  return {s.phi, {gx, gy, gz}, gg >= (std::int64_t{1} << 28) ? fixed::FloorDiv(std::int64_t{1} << 56, gg) : 0};
+}
+
+// One tick's working state. The tick is a loop of steps, each taking at most one field sample;
+// the steps are separate functions so that each keeps its few values in registers.
+struct Tick {
+  const sampler::TrilinearSampler& field;
+  const ProxyParams& params;
+  const LipschitzBound& lb;
+  Vec h;
+  std::int64_t delta;
+  bool far;   // HIP more than 32 voxels away: d is shrunk for the projection products
+  bool fast;  // the HIP moved further since the last tick than settle_samples pieces reach
+  Vec p;
+  Local at;
+  bool grad_valid;
+  bool phi_h_known;
+  bool converged;
+  std::int64_t phi_h;
+  int samples;
+  int gradient_samples;
+  int halvings;  // consecutive rejected steps: the next move is halved this often
+
+  // Member by member (an aggregate initialisation here compiles to a block clear first).
+  Tick(const sampler::TrilinearSampler& f, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far, bool is_fast,
+       Vec proxy, const Local& local, bool have_grad, std::int64_t phi_at_hip, bool have_phi_h)
+      : field(f),
+        params(prm),
+        lb(f.lipschitz()),
+        h(hip),
+        delta(d),
+        far(is_far),
+        fast(is_fast),
+        p(proxy),
+        at(local),
+        grad_valid(have_grad),
+        phi_h_known(have_phi_h),
+        converged(false),
+        phi_h(phi_at_hip),
+        samples(have_phi_h ? 1 : 0),
+        gradient_samples(0),
+        halvings(0) {}
+};
+
+enum class Next { kContinue, kDone };
+
+Next SamplePhiAtHip(Tick& t) {
+  t.phi_h = t.field.Phi(static_cast<std::int32_t>(t.h[0]), static_cast<std::int32_t>(t.h[1]),
+                        static_cast<std::int32_t>(t.h[2]));
+  t.phi_h_known = true;
+  ++t.samples;
+  return Next::kContinue;
+}
+
+// Free motion (φ(X_p) above the near band): jump to X_h if [X_p, X_h] is certified and X_h is
+// outside, else one sphere-tracing step of φ/Λ towards it, which cannot reach φ = 0.
+[[gnu::noinline]] Next FreeStep(Tick& t) {
+  if (!t.phi_h_known) return SamplePhiAtHip(t);
+  const Vec d = Sub(t.h, t.p);
+  if (t.phi_h > 0 && Certified(t.at.phi, t.phi_h, d, t.lb, t.delta)) {
+    t.p = t.h;
+    t.at.phi = t.phi_h;
+    t.grad_valid = false;
+    return Next::kDone;
+  }
+  const auto len = static_cast<std::int64_t>(ISqrt(Norm2(d)));
+  // Λ along d, rounded up; 0 only for a constant field.
+  const std::int64_t rate = std::min<std::int64_t>(t.lb.norm, fixed::FloorDiv(AxisVariation(d, t.lb) + len - 1, len));
+  // φ budget after the rounding slack and the truncation of the new position (≤ 1 LSB per axis).
+  const std::int64_t budget = t.at.phi - kSlack - ((2 * std::int64_t{t.lb.norm}) >> 16) - 1;
+  const std::int64_t step = rate == 0 ? len : budget <= 0 ? 0 : fixed::FloorDiv(budget << 16, rate);
+  if (step >= len) {  // the ball of radius φ/Λ around X_p holds all of [X_p, X_h]
+    t.p = t.h;
+    t.at.phi = t.phi_h;
+    t.grad_valid = false;
+    return Next::kDone;
+  }
+  const Vec x = Plus(t.p, Scale(d, step, len));
+  if (step <= 0 || x == t.p) return Next::kDone;  // cannot happen above the near band
+  t.p = x;
+  t.at.phi = t.field.Phi(ToGridPos(x));
+  t.grad_valid = false;
+  ++t.samples;
+  return Next::kContinue;
+}
+
+// Leaving contact: the HIP is outside the linearisation and the field. Move towards it, halving
+// the step until the segment certifies.
+[[gnu::noinline]] Next LeaveStep(Tick& t) {
+  const Vec step = Halve(Sub(t.h, t.p), t.halvings);
+  const Vec q = Plus(t.p, step);
+  if (q == t.p) return Next::kDone;
+  std::int64_t phi_q = t.phi_h;
+  if (q != t.h) {
+    phi_q = t.field.Phi(ToGridPos(q));
+    ++t.samples;
+  }
+  if (phi_q >= -t.delta / 2 && Certified(t.at.phi, phi_q, step, t.lb, t.delta)) {
+    t.p = q;
+    t.at.phi = phi_q;
+    t.grad_valid = false;
+    t.halvings = 0;
+  } else if (++t.halvings > kMaxHalvings) {
+    return Next::kDone;
+  }
+  return Next::kContinue;
+}
+
+// Near the surface: iterations of eq. 9, projected and normalised, split into its normal and
+// tangential parts,
+//   Δn = −β φ ∇φ/|∇φ|²             (Gauss–Newton back to φ = 0)
+//   Δt = γ (d − (∇φ·d) ∇φ/|∇φ|²)     (towards the HIP within the tangent plane),
+// each capped, sampled and certified. Runs until the budget, convergence, or a change of mode
+// (kLeave: the HIP is outside the linearisation and the field; kContinue: the proxy left the near
+// band). Works on locals so that the loop stays in registers.
+enum class Contact { kDone, kLeave, kContinue };
+
+[[gnu::noinline]] Contact ContactRun(Tick& t) {
+  const ProxyParams& prm = t.params;
+  const std::int64_t ax = t.lb.axis[0], ay = t.lb.axis[1], az = t.lb.axis[2];
+  const std::int64_t hx = t.h[0], hy = t.h[1], hz = t.h[2];
+  const std::int64_t delta = t.delta;
+  std::int64_t px = t.p[0], py = t.p[1], pz = t.p[2];
+  Local at = t.at;
+  Contact result = Contact::kDone;
+  bool lagging = false;  // the last move left its target far (see below): more samples allowed
+  while (t.samples < prm.max_iterations && (t.samples < prm.settle_samples || lagging)) {
+    if (at.inv_grad2 == 0) break;  // |∇φ| < 1/4: no normal to project along
+    const std::int64_t gx = at.grad[0], gy = at.grad[1], gz = at.grad[2];
+    std::int64_t dx = hx - px, dy = hy - py, dz = hz - pz;
+    std::int64_t dot16 = RoundShift(dx * gx + dy * gy + dz * gz, 16);
+    const std::int64_t c = at.phi + dot16;  // φ linearised at X_p, evaluated at X_h
+    if (c >= 0) {
+      if (!t.phi_h_known) SamplePhiAtHip(t);  // (the settle budget does not gate leaving)
+      if (t.phi_h >= 0) {
+        result = Contact::kLeave;
+        break;
+      }
+    }
+    if (t.far) {  // |d_i| ≤ 64 voxels, shrunk along its direction, bounds the products below
+      const Vec d = ShrinkTo({dx, dy, dz}, 22);
+      dx = d[0], dy = d[1], dz = d[2];
+      dot16 = RoundShift(dx * gx + dy * gy + dz * gz, 16);
+    }
+    const std::int64_t back = (RoundShift(prm.beta_q16 * at.phi, 16) * at.inv_grad2) >> 24;  // Q16
+    const std::int64_t along = (dot16 * at.inv_grad2) >> 24;                                 // Q16
+    const Vec dn = {-((back * gx) >> 16), -((back * gy) >> 16), -((back * gz) >> 16)};
+    Vec dt = {dx - ((along * gx) >> 16), dy - ((along * gy) >> 16), dz - ((along * gz) >> 16)};  // |dt_i| ≤ √3·2^22
+    if (prm.gamma_q16 != (1 << 16)) {
+      for (auto& v : dt) v = RoundShift(prm.gamma_q16 * v, 16);
+    }
+    if (prm.mu_static_q16 > 0) {
+      // Friction cone: the HIP's tangential offset from the proxy is dt, its depth below the
+      // linearised surface −c/|∇φ|. Stick inside the μs cone; else slide to the μd cone's edge.
+      const auto t_len = static_cast<std::int64_t>(ISqrt(Norm2(dt)));
+      const auto g_len = static_cast<std::int64_t>(ISqrt(gx * gx + gy * gy + gz * gz));
+      const std::int64_t depth = std::max<std::int64_t>(0, (-c << 16) / g_len);
+      if ((t_len << 16) <= prm.mu_static_q16 * depth) {
+        dt = {};
+      } else {
+        dt = Scale(dt, t_len - RoundShift(prm.mu_dynamic_q16 * depth, 16), t_len);
+      }
+    }
+    const std::int64_t nx = std::llabs(dn[0]), ny = std::llabs(dn[1]), nz = std::llabs(dn[2]);
+    const std::int64_t tx = std::llabs(dt[0]), ty = std::llabs(dt[1]), tz = std::llabs(dt[2]);
+    // Convergence test: the whole update, |Δn|₁ + |Δt|₁, within the tolerance.
+    if (nx + ny + nz + tx + ty + tz <= prm.tolerance_q16) {
+      t.converged = true;
       break;
     }
-    p = Add(p, ScaleTo(d, safe, len));
-  }
-
-  // Phase 2: eq. 9 as a γ step towards the HIP followed by a normalised φ step back to φ = 0.
-  for (int it = 0; it < params.max_iterations && !(p == hip); ++it) {
-    Delta d = Diff(hip, p);
-    Delta step{{ShiftRight(d.v[0] * params.gamma_q16, 16, Round::kNearest),
-                ShiftRight(d.v[1] * params.gamma_q16, 16, Round::kNearest),
-                ShiftRight(d.v[2] * params.gamma_q16, 16, Round::kNearest)}};
-    const std::int64_t step_len = Length(step);
-    if (step_len > params.max_step_q16) step = ScaleTo(step, params.max_step_q16, step_len);
-    GridPos q = Add(p, step);
-    const sampler::Sample s = field.At(q);
-    ++r.iterations;
-    if (s.phi < 0) {
-      const std::int64_t g2 = std::int64_t{s.grad[0]} * s.grad[0] + std::int64_t{s.grad[1]} * s.grad[1] +
-                              std::int64_t{s.grad[2]} * s.grad[2];  // Q32.32
-      // A vanishing gradient (flat, clamped interior) gives no direction to project along: keep
-      // the proxy where it was rather than push it somewhere arbitrary.
-      // |∇φ| ≥ 1/4 also bounds the projection to 4·|φ|, a fraction of a voxel near the surface.
-      if (g2 < (std::int64_t{1} << 28)) break;
-      // ratio = β φ / |∇φ|² in Q16.16.
-      const std::int64_t ratio =
-          ShiftRight(DivRound(std::int64_t{s.phi} << 32, g2) * params.beta_q16, 16, Round::kNearest);
-      for (int a = 0; a < 3; ++a) {
-        const std::int64_t back = ShiftRight(ratio * s.grad[static_cast<std::size_t>(a)], 16, Round::kNearest);
-        step.v[a] -= back;
+    // The move, in pieces that each certify whenever φ at their ends is ≥ −δ/2 (the rest
+    // condition): the first carries all of Δn and as much of Δt as φ(X_p) + 3δ/2 − Λ|Δn| allows,
+    // each further piece (Λ|piece| ≤ 3δ/2) another stretch of Δt, as many as the sample budget
+    // allows. Every piece end is sampled and every piece certified; a failing piece ends the move
+    // at the last certified end. So the tangential speed is bounded by the budget (about δ per
+    // sample), never by a leap that could skip through a thin part.
+    const std::int64_t dn_variation = nx * ax + ny * ay + nz * az;
+    std::int64_t dt_variation = tx * ax + ty * ay + tz * az;
+    const std::int64_t first_room = std::max<std::int64_t>(0, ((at.phi + 3 * delta / 2 - kSlack) << 16) - dn_variation);
+    if (dt_variation > first_room && t.lb.norm_helps) dt_variation = Variation(dt, t.lb, first_room);
+    if (t.halvings > 0) {
+      dt = Halve(dt, t.halvings);
+      dt_variation >>= t.halvings;
+    }
+    const std::int64_t piece = (3 * delta / 2 - kSlack) << 16;
+    // Samples this move may take: the tick settles after settle_samples unless the HIP is fast
+    // and the target more than two pieces away (fast sliding): then up to max_iterations.
+    // Lagging: a fast HIP and a target beyond the first piece, or a target more than five pieces
+    // away whatever the HIP did (so a proxy never falls further and further behind).
+    lagging = dt_variation > first_room && (t.fast || dt_variation > first_room + 4 * piece);
+    const int room = (lagging ? prm.max_iterations : std::min(prm.settle_samples, prm.max_iterations)) - t.samples;
+    if (room <= 0) break;
+    std::int64_t reached = 0;                // Δt's variation covered by the accepted pieces
+    std::int64_t ex = px, ey = py, ez = pz;  // end of the last accepted piece
+    bool moved = false, left = false;
+    for (int j = 0; j < room; ++j) {
+      const std::int64_t reach = std::min(dt_variation, j == 0 ? first_room : reached + piece);
+      if (j > 0 && reach <= reached) break;  // all of Δt covered
+      const Vec along_dt = reach >= dt_variation ? dt : Scale(dt, reach, dt_variation);
+      const std::int64_t qx = px + dn[0] + along_dt[0], qy = py + dn[1] + along_dt[1], qz = pz + dn[2] + along_dt[2];
+      if (qx == ex && qy == ey && qz == ez) break;
+      const bool last = j == room - 1 || reach >= dt_variation;
+      // The final end gets φ and ∇φ while gradient_samples allows; other ends φ alone, the
+      // gradient held (refreshed at the next gradient sample, next tick at the latest).
+      const bool with_gradient = last && t.gradient_samples < prm.gradient_samples;
+      sampler::Sample s;
+      const auto x = static_cast<std::int32_t>(qx), y = static_cast<std::int32_t>(qy),
+                 z = static_cast<std::int32_t>(qz);
+      if (with_gradient) {
+        s = t.field.At(x, y, z);
+        ++t.gradient_samples;
+      } else {
+        s.phi = t.field.Phi(x, y, z);
       }
-      q = Add(p, step);
+      ++t.samples;
+      // Certification of the piece [e, q]: |∇φ·piece| ≤ |∇φ·Δn| + |∇φ·Δt-part| pointwise, so the
+      // parts' bounds (Δt's scale linearly along it; truncation only shortens) bound its
+      // variation without a new product; the exact bound is the fallback.
+      const std::int64_t need = (at.phi + s.phi + 2 * delta - kSlack) << 16;
+      const std::int64_t piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
+      if (!(s.phi >= -delta / 2 && need >= 0 &&
+            (piece_variation <= need || Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, t.lb, delta)))) {
+        break;
+      }
+      ex = qx, ey = qy, ez = qz;
+      reached = reach;
+      moved = true;
+      if (with_gradient) {
+        at = FromSample(s);
+      } else {
+        at.phi = s.phi;
+      }
+      if (at.phi > prm.near_q16) {  // off the surface (a convex edge): free motion next
+        left = true;
+        break;
+      }
     }
-    const bool converged = std::llabs(step.v[0]) <= params.tolerance_q16 &&
-                           std::llabs(step.v[1]) <= params.tolerance_q16 &&
-                           std::llabs(step.v[2]) <= params.tolerance_q16;
-    p = q;
-    if (converged) break;
+    if (moved) {
+      // Convergence test, on the move just made: |Δ|₁ within the tolerance ends the iteration
+      // (saves computing the next, smaller one).
+      const bool small = std::llabs(ex - px) + std::llabs(ey - py) + std::llabs(ez - pz) <= prm.tolerance_q16;
+      px = ex, py = ey, pz = ez;
+      t.halvings = 0;
+      if (left) {
+        result = Contact::kContinue;
+        break;
+      }
+      if (small) {
+        t.converged = true;
+        break;
+      }
+    } else if (++t.halvings > kMaxHalvings) {
+      break;
+    }
   }
+  t.p = {px, py, pz};
+  t.at = at;
+  return result;
+}
 
-  state.proxy = p;
-  state.valid = true;
-  r.proxy = p;
-  if (p == hip) return r;
-
-  // Eq. 10: f = −k (X_h − X_p) = k·h·(X_p − X_h), clamped with its direction kept.
-  const Delta pen = Diff(p, hip);
-  const std::int64_t pen_len = Length(pen);
-  r.contact = true;
-  r.penetration_q16 = SaturateToInt32(pen_len);
+// Eq. 10, f = k·h·(X_p − X_h), clamped to max_force with its direction kept.
+[[gnu::noinline]] void Force(const ProxyParams& params, GridPos p, GridPos h, TickResult& r) {
+  const Vec u = Diff(p, h);  // |u_i| < 2^29.6
   const std::int64_t k = params.k.value.raw();
-  const std::int64_t magnitude = ShiftRight(k * pen_len, 16, Round::kNearest);
   const std::int64_t max_f = params.max_force.value.raw();
-  for (int a = 0; a < 3; ++a) {
-    std::int64_t f = 0;
-    if (magnitude > max_f) {
-      f = DivRound(max_f * pen.v[a], pen_len);
-    } else {
-      f = ShiftRight(k * pen.v[a], 16, Round::kNearest);
-    }
-    r.force[static_cast<std::size_t>(a)] = {fixed::Q16::FromRaw(SaturateToInt32(f))};
-  }
+  const auto len = static_cast<std::int64_t>(ISqrt(Norm2(u)));
+  const std::int64_t magnitude = RoundShift(k * len, 16);
   r.clamped = magnitude > max_f;
+  std::int32_t any = 0;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const std::int64_t f = r.clamped ? fixed::DivRound(max_f * u[a], len) : RoundShift(k * u[a], 16);
+    r.force[a] = {fixed::Q16::FromRaw(static_cast<std::int32_t>(f))};
+    any |= static_cast<std::int32_t>(f);
+  }
+  r.contact = any != 0;
+  r.penetration_q16 = r.contact ? SaturateToInt32(len) : 0;
+}
+
+}  // namespace
+
+namespace {
+
+// φ(X_h) not sampled yet (SlowTick's argument).
+constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
+
+// Everything but a free tick: start-up, the march towards a surface, contact, leaving. `phi_h`
+// is φ(X_h) when ProxyTick already sampled it (one sample taken), else kPhiUnknown. (Few enough
+// arguments to pass in registers, so that ProxyTick's calls are tail calls.)
+[[gnu::noinline]] TickResult SlowTick(const sampler::TrilinearSampler& field, const ProxyParams& params,
+                                      ProxyState& state, const GridPos& hip, std::int64_t phi_h) {
+  // Clamp the HIP, and a free proxy that followed it, to the grid ± 4096 voxels: beyond, it is
+  // free space (the proxy moves along its own side, never across the grid), and every difference
+  // of positions below stays under 2^29.6.
+  const bool inside = InHipBox(hip, field);
+  const GridPos h = inside ? hip : ClampHip(hip, field);
+  if (state.phi > params.near_q16 && !InHipBox(state.proxy, field)) state.proxy = ClampHip(state.proxy, field);
+  const bool phi_h_known = phi_h != kPhiUnknown && inside;
+  TickResult r;
+
+  // Start-up, reset, or a HIP that has been inside since then: the proxy follows the HIP with zero
+  // force until the HIP is outside once (no entry side is known before that).
+  if (!state.valid || !state.seated) {
+    const std::int32_t phi_start = field.Phi(h);
+    state = {h, phi_start, {}, 0, false, h, phi_start >= 0, true};
+    r.proxy = h;
+    r.iterations = 1;
+    return r;
+  }
+
+  const std::int64_t delta = params.depth_tolerance_q16;
+  Tick t(field, params, Pos(h), delta,
+         MaxAbs(Diff(h, state.proxy)) > (std::int64_t{1} << 21),  // the proxy moves < 1 voxel a sample
+         AxisVariation(Diff(h, state.last_hip), field.lipschitz()) >
+             std::int64_t{params.settle_samples} * ((3 * delta / 2) << 16),
+         Pos(state.proxy), {state.phi, {state.grad[0], state.grad[1], state.grad[2]}, state.inv_grad2},
+         state.grad_valid, phi_h, phi_h_known);
+  // Each pass takes at most one field sample; a pass without one ends the loop or samples in the
+  // next, so 2·max_iterations + 2 passes bound it.
+  for (int pass = 0; pass < 2 * params.max_iterations + 2 && t.samples < params.max_iterations; ++pass) {
+    if (t.p == t.h) break;
+    if (t.at.phi > params.near_q16) {
+      if (FreeStep(t) == Next::kDone) break;
+      continue;
+    }
+    if (!t.grad_valid) {  // arrived from free motion or leaving: φ and ∇φ at the proxy first
+      t.at = FromSample(field.At(static_cast<std::int32_t>(t.p[0]), static_cast<std::int32_t>(t.p[1]),
+                                 static_cast<std::int32_t>(t.p[2])));
+      t.grad_valid = true;
+      ++t.samples;
+      ++t.gradient_samples;
+      continue;
+    }
+    const Contact c = ContactRun(t);
+    if (c == Contact::kDone) break;
+    if (c == Contact::kLeave && LeaveStep(t) == Next::kDone) break;
+  }
+
+  const GridPos p = ToGridPos(t.p);
+  state.proxy = p;
+  state.last_hip = h;
+  state.phi = static_cast<std::int32_t>(t.at.phi);
+  state.grad = {static_cast<std::int32_t>(t.at.grad[0]), static_cast<std::int32_t>(t.at.grad[1]),
+                static_cast<std::int32_t>(t.at.grad[2])};
+  state.inv_grad2 = t.at.inv_grad2;
+  state.grad_valid = t.grad_valid;
+  r.proxy = p;
+  r.iterations = t.samples;
+  r.converged = t.converged;
+  if (t.p == t.h) return r;
+
+  // Eq. 10 only when the proxy is at the surface (within the near band, where eq. 9 holds it) and
+  // the HIP is behind it; a proxy still catching up in free space gives no force.
+  bool behind = false;
+  if (t.grad_valid) {
+    behind = t.at.phi + RoundShift(Dot(Sub(t.h, t.p), t.at.grad), 16) < 0;
+  } else if (t.phi_h_known) {
+    behind = t.phi_h < 0;
+  }
+  if (t.at.phi > params.near_q16 || !behind) return r;
+  Force(params, p, h, r);
   return r;
+}
+
+}  // namespace
+
+namespace {
+
+// A free tick whose HIP left the ball around the proxy: sample φ(X_h), jump if certified, else
+// the general tick (which then marches, or makes contact).
+[[gnu::noinline]] TickResult FreeSampled(const sampler::TrilinearSampler& field, const ProxyParams& params,
+                                         ProxyState& state, const GridPos& h, const Vec& d) {
+  const std::int32_t phi_h = field.Phi(h);
+  if (phi_h > 0 && Certified(state.phi, phi_h, d, field.lipschitz(), params.depth_tolerance_q16)) {
+    state.proxy = h;
+    state.last_hip = h;
+    state.phi = phi_h;
+    state.grad_valid = false;
+    TickResult r;
+    r.proxy = h;
+    r.iterations = 1;
+    return r;
+  }
+  return SlowTick(field, params, state, h, phi_h);
+}
+
+}  // namespace
+
+TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state,
+                     GridPos hip) {
+  if (!(state.valid && state.seated && state.phi > params.near_q16))
+    return SlowTick(field, params, state, hip, kPhiUnknown);
+
+  // Free motion, the common case: the proxy is off the surface and φ(X_p) is known exactly or
+  // as a lower bound. Without a sample this path calls nothing (and so saves no registers). It
+  // follows the HIP anywhere, even far outside the grid (|d_i| < 2^32 keeps reach < 2^57); the
+  // other paths first clamp both to the grid ± 4096 voxels.
+  const Vec d = Diff(hip, state.proxy);
+  const std::int64_t reach = AxisVariation(d, field.lipschitz());  // ≥ |φ(x) − φ(X_p)| on [X_p, X_h]
+  if (reach >= (std::int64_t{state.phi} - params.near_q16 - kSlack) << 16) {
+    return FreeSampled(field, params, state, hip, d);
+  }
+  // All of [X_p, X_h] lies in the ball where φ > 1/2 voxel: move without sampling, and carry
+  // φ(X_h) ≥ φ(X_p) − reach as a lower bound (it only decides when to sample again).
+  state.phi -= static_cast<std::int32_t>((reach >> 16) + 1);
+  state.proxy = hip;
+  state.last_hip = hip;
+  state.grad_valid = false;
+  TickResult r;
+  r.proxy = hip;
+  return r;
+}
+
+namespace {
+
+std::int64_t SaturatingAdd(std::int64_t a, std::int64_t b) {
+  std::int64_t out = 0;
+  if (__builtin_add_overflow(a, b, &out))
+    return b > 0 ? std::numeric_limits<std::int64_t>::max() : std::numeric_limits<std::int64_t>::min();
+  return out;
+}
+
+}  // namespace
+
+void PassivityObserver::Update(GridPos hip, const TickResult& r, const ProxyParams& params) {
+  const std::array<std::int32_t, 3> force = {r.force[0].value.raw(), r.force[1].value.raw(), r.force[2].value.raw()};
+  // u = X_h − X_p of the spring that produced the force (zero when no force was written).
+  const Vec u = r.contact ? Diff(hip, r.proxy) : Vec{};
+  if (primed) {
+    // Differences of raw int32 positions are < 2^32; clamped to ±2^30 (far beyond any grid) so
+    // that every product below fits int64. f·Δh: |f| ≤ 2^23 raw.
+    const auto clamp30 = [](std::int64_t v) { return std::clamp<std::int64_t>(v, -(1LL << 30), 1LL << 30); };
+    const Vec dh = Diff(hip, last_hip);
+    std::int64_t work = 0;
+    for (std::size_t a = 0; a < 3; ++a) work -= std::int64_t{last_force[a]} * clamp30(dh[a]);
+    energy_q32 = SaturatingAdd(energy_q32, work);
+    const Vec du = {clamp30(u[0] - last_u[0]), clamp30(u[1] - last_u[1]), clamp30(u[2] - last_u[2])};
+    // (k/2)|Δu|²: Q16 × (Q32 >> 16) → Q32 N·voxel, saturating.
+    std::int64_t term = 0;
+    if (__builtin_mul_overflow(std::int64_t{params.k.value.raw()}, Norm2(du) >> 16, &term))
+      term = std::numeric_limits<std::int64_t>::max();
+    zoh_bound_q32 = SaturatingAdd(zoh_bound_q32, term / 2);
+  }
+  last_hip = hip;
+  last_u = u;
+  last_force = force;
+  primed = true;
 }
 
 }  // namespace palpa::proxy

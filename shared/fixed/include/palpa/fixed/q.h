@@ -7,8 +7,10 @@
 // palpa/proxy/proxy.h for every quantity's format, range and resolution).
 #pragma once
 
+#include <array>
 #include <bit>
 #include <concepts>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 
@@ -97,9 +99,9 @@ constexpr Q<T> Narrow(Wide<F> w, Round round) {
 
 using Q16 = Q<16>;  ///< Q16.16: range ±32768, resolution 1.53e-5
 
-/// Integer square root: ⌊√v⌋ for v ≥ 0 (0 for v ≤ 0). Bit-by-bit, at most 32 iterations: bounded
-/// and identical on every target (no floating point).
-constexpr std::uint64_t ISqrt(std::int64_t v) {
+/// Integer square root, the reference form: ⌊√v⌋ for v ≥ 0 (0 for v ≤ 0). Bit-by-bit, at most 32
+/// iterations, constexpr. The tests check ISqrt against it; the loop uses ISqrt.
+constexpr std::uint64_t ISqrtBitwise(std::int64_t v) {
   if (v <= 0) return 0;
   auto x = static_cast<std::uint64_t>(v);
   std::uint64_t result = 0;
@@ -117,7 +119,38 @@ constexpr std::uint64_t ISqrt(std::int64_t v) {
   return result;
 }
 
-/// Rounded integer division n/d (d ≠ 0), ties away from zero.
+/// Integer square root: ⌊√v⌋ for v ≥ 0 (0 for v ≤ 0), exact for every int64.
+/// The FPU's correctly rounded √ of the nearest double gives an estimate within 1 of ⌊√v⌋ (for
+/// v < 2^63 its relative error is ≤ 2^−52, i.e. < 2^−20 absolute); the result is then corrected
+/// with integer arithmetic until r² ≤ v < (r + 1)². So the answer is the same integer on every
+/// target whatever the FPU's rounding mode: floating point only speeds up finding it (one square
+/// root instead of a 32-step loop or two 64-bit divisions). At most two corrections run.
+inline std::uint64_t ISqrt(std::int64_t v) {
+  if (v <= 0) return 0;
+  const auto u = static_cast<std::uint64_t>(v);
+  auto r = static_cast<std::uint64_t>(__builtin_sqrt(static_cast<double>(v)));
+  // r < 2^31.5 + 1, so (r + 1)² < 2^64: no wrap.
+  if (r * r > u) --r;
+  if (r * r > u) --r;
+  if ((r + 1) * (r + 1) <= u) ++r;
+  return r;
+}
+
+/// Floor division ⌊n/d⌋ for 0 ≤ n < 2^62 and 0 < d < 2^62, exact. As ISqrt: a double estimate
+/// (within 1 of the quotient for quotients below 2^50, the only ones palpa forms), then integer
+/// corrections until q·d ≤ n < (q + 1)·d. Same bits on every target.
+inline std::int64_t FloorDiv(std::int64_t n, std::int64_t d) {
+  // n and d round to doubles within 2^−53 relative, the quotient too: below 2^50 the estimate is
+  // within 0.4 of n/d, so after truncation one step either way corrects it (two are allowed).
+  auto q = static_cast<std::int64_t>(static_cast<double>(n) / static_cast<double>(d));
+  if (q * d > n) --q;
+  if (q * d > n) --q;
+  if ((q + 1) * d <= n) ++q;
+  if ((q + 1) * d <= n) ++q;
+  return q;
+}
+
+/// Rounded integer division n/d (d ≠ 0), ties away from zero. Start-up and rare paths.
 constexpr std::int64_t DivRound(std::int64_t n, std::int64_t d) {
   const bool negative = (n < 0) != (d < 0);
   const std::uint64_t un = n < 0 ? static_cast<std::uint64_t>(-n) : static_cast<std::uint64_t>(n);

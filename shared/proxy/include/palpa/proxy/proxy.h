@@ -1,17 +1,17 @@
-// The god-object proxy on a signed distance field (paper §3.3, eq. 9) and its force (eq. 10), in
-// fixed point. RT-safe after construction: no allocation, no exceptions, no syscalls, bounded
-// iterations (kMaxTraceSteps + max_iterations samples per tick).
+// The god-object proxy on a signed distance field (paper §3.3, eq. 9), its force (eq. 10), Coulomb
+// friction (optional) and a passivity observer, in fixed point. RT-safe after start-up: no
+// allocation, no exceptions, no syscalls, at most `max_iterations` field samples per tick.
 //
-// Formats (all int32 unless noted):
-//   position, HIP, proxy   Q16.16 voxel units (grid frame)   range ±32768 voxel, LSB 1/65536 voxel
-//   φ (field values)       Q16.16 voxel units                |φ| ≤ band ≤ 64 voxels
-//   ∇φ                     Q16.16, voxel per voxel           |component| ≤ 2·band (neighbour diff)
-//   γ, β (eq. 9)           Q16.16, dimensionless             γ in (0, 1], β in (0, 1]
-//   k·h (stiffness)        Q16.16 N per voxel                (0, 32768) N/voxel, LSB 1.5e-5 N/voxel
-//   force                  Q16.16 N                          |f| ≤ max_force ≤ 100 N, LSB 1.5e-5 N
-// Overflow analysis: grid ≤ 4096 nodes per axis, so positions ≤ 2^28 raw and differences ≤ 2^29;
-// squared lengths ≤ 3·2^58 < 2^63. k·h·Δ is formed in int64 (≤ 2^31·2^29) and saturated. φ·∇φ
-// products ≤ 2^22·2^23. MakeProxyParams rejects parameters outside these ranges at start-up.
+// Formats (int32 unless noted; docs/realtime-core.md has the full table and overflow analysis):
+//   HIP, proxy           Q16.16 voxels (grid frame)     HIP clamped to the grid ± 4096 voxels
+//   φ                    Q16.16 voxels                  |φ| ≤ band ≤ 64
+//   ∇φ                   Q16.16 voxel/voxel             |component| ≤ band
+//   γ, β, μs, μd, δ      Q16.16                         γ, β in (0, 1]; μ in [0, 4]; δ in (0, 1/2]
+//   k·h (stiffness)      Q16.16 N per voxel             [1e-3, 32767]
+//   force                Q16.16 N                       |f| ≤ max_force ≤ 100 N
+//   energy (observer)    int64 Q32.32 N·voxel           saturating
+// MakeProxyParams rejects anything outside these ranges at start-up, so no intermediate can
+// overflow in the loop; the analysis is in docs/realtime-core.md § Overflow.
 #pragma once
 
 #include <array>
@@ -26,11 +26,10 @@ namespace palpa::proxy {
 
 using sampler::GridPos;
 
-/// Sphere-tracing steps per tick for free motion (phase 1).
-inline constexpr int kMaxTraceSteps = 16;
-/// 1/√3 in Q0.16, rounded down: the safe step factor for a trilinear field whose neighbour
-/// differences are at most 1 voxel (|∇φ| ≤ √3 inside any cell).
-inline constexpr std::int32_t kInvLipschitzQ16 = 37837;
+/// How far outside the grid the HIP is followed, Q16.16 voxels (4096 voxels). Beyond it the HIP
+/// is clamped for the proxy (it is free space either way), which bounds every difference of
+/// positions by 2^29.6 raw.
+inline constexpr std::int32_t kHipMarginQ16 = std::int32_t{1} << 28;
 
 /// Converts between device-frame metres and the grid frame. Non-RT construction; conversions
 /// are used at the device boundary of the tick (IEEE double, same bits on every target with
@@ -46,39 +45,55 @@ struct GridFrame {
   std::array<double, 3> ToMetres(GridPos p) const;
 };
 
-/// Parameters of eq. 9/10 in loop formats. Build with MakeProxyParams.
+/// Parameters of the tick in loop formats. Build with MakeProxyParams.
 struct ProxyParams {
-  std::int32_t gamma_q16 = 1 << 15;        ///< eq. 9 γ: fraction of (X_h − X_p) taken per iteration
-  std::int32_t beta_q16 = 1 << 16;         ///< eq. 9 β, applied to the Gauss–Newton normalised term
-  std::int32_t max_step_q16 = 1 << 14;     ///< step cap per iteration, voxels (0.25): keeps steps
-                                           ///< far below a 2-voxel wall so projection stays on the entry side
-  std::int32_t tolerance_q16 = 4;          ///< convergence: max |ΔX_p| component per iteration, voxels
-  std::int32_t contact_eps_q16 = 1 << 10;  ///< phase 1 stops this close to φ = 0 (1/64 voxel)
-  int max_iterations = 32;                 ///< eq. 9 iterations per tick (phase 2)
-  fixed::NewtonsPerVoxel k;                ///< k·h
-  fixed::Newtons max_force;                ///< force clamp, N
-  double voxel_m = 1;                      ///< for reporting only
+  std::int32_t gamma_q16 = 1 << 16;            ///< eq. 9 γ on the (tangential) HIP term
+  std::int32_t beta_q16 = 1 << 16;             ///< eq. 9 β on the normalised φ term
+  std::int32_t depth_tolerance_q16 = 1 << 14;  ///< δ: no point of the proxy's path has φ < −δ
+  std::int32_t near_q16 = 1 << 15;             ///< below this φ (1/2 voxel) eq. 9 holds the proxy
+  std::int32_t tolerance_q16 = 1 << 8;         ///< convergence: a move or update |Δ|₁ ≤ 1/256 voxel
+  int max_iterations = 4;                      ///< field samples per tick, the hard bound on its work
+  int settle_samples = 1;                      ///< samples per tick unless the proxy lags its target
+  int gradient_samples = 1;                    ///< of which with ∇φ (32 values; the rest φ, 8)
+  fixed::NewtonsPerVoxel k;                    ///< k·h
+  fixed::Newtons max_force;                    ///< force clamp, N
+  std::int32_t mu_static_q16 = 0;              ///< Coulomb μs; 0 = friction off
+  std::int32_t mu_dynamic_q16 = 0;             ///< Coulomb μd ≤ μs
+  double voxel_m = 1;                          ///< for reporting only
 };
 
 /// SI inputs of the proxy.
 struct ProxyConfig {
-  double k_n_per_m = 800;   ///< stiffness k, N/m (paper eq. 10)
-  double max_force_n = 8;   ///< force clamp, N (direction preserved)
-  double gamma = 0.5;       ///< eq. 9 γ
-  double beta = 1.0;        ///< eq. 9 β (normalised, see ProxyTick)
-  int max_iterations = 32;  ///< 1..256
+  double k_n_per_m = 800;                ///< stiffness k, N/m (paper eq. 10)
+  double max_force_n = 8;                ///< force clamp, N (direction preserved)
+  double gamma = 1.0;                    ///< eq. 9 γ, (0, 1]
+  double beta = 1.0;                     ///< eq. 9 β, (0, 1] (normalised, see ProxyTick)
+  int max_iterations = 4;                ///< field samples per tick (hard bound), 2..64
+  int settle_samples = 1;                ///< samples per tick while the proxy keeps up, 1..max_iterations
+  int gradient_samples = 1;              ///< of those, how many also sample ∇φ, 1..max_iterations
+  double mu_static = 0;                  ///< Coulomb static friction coefficient, [0, 4]; 0 = off
+  double mu_dynamic = 0;                 ///< Coulomb dynamic friction coefficient, [0, μs]
+  double depth_tolerance_voxels = 0.25;  ///< δ, (0, 0.5]: the deepest any path point may be
 };
 
 /// Validates `config` for a field with voxel size `voxel_m` and converts it to loop formats.
-/// Errors (a static sentence) for: k ≤ 0 or > 1e5 N/m, k·h outside [1e-3, 32767] N/voxel (too
-/// coarse or overflowing Q16.16), max force ≤ 0 or > 100 N, γ or β outside (0, 1], iterations
-/// outside 1..256, non-finite input. Non-RT.
+/// Errors (a static sentence) for: k ≤ 0 or > 1e5 N/m, k·h outside [1e-3, 32767] N/voxel, max
+/// force ≤ 0 or > 100 N, γ or β outside (0, 1], iterations outside 2..64, gradient samples
+/// outside 1..iterations, μs outside [0, 4], μd
+/// outside [0, μs], δ outside (0, 0.5], non-finite input. Non-RT.
 std::expected<ProxyParams, const char*> MakeProxyParams(const ProxyConfig& config, double voxel_m);
 
-/// Proxy state carried between ticks.
+/// Proxy state carried between ticks. The field must not change while it is valid (set
+/// valid = false after swapping the field: the next tick restarts the proxy at the HIP).
 struct ProxyState {
   GridPos proxy;
-  bool valid = false;  ///< false: next tick starts the proxy at the HIP (start-up, reset)
+  std::int32_t phi = 0;  ///< φ(proxy) as sampled, Q16.16 voxels; off the surface (> 1/2 voxel) a lower bound
+  std::array<std::int32_t, 3> grad{};  ///< ∇φ at or near the proxy (see gradient_samples), if grad_valid
+  std::int64_t inv_grad2 = 0;          ///< 2^56/|∇φ|² in raw units (Q24 of 1/|∇φ|²); 0 if |∇φ| < 1/4
+  bool grad_valid = false;
+  GridPos last_hip;     ///< the HIP of the last tick (its speed decides the contact sample budget)
+  bool seated = false;  ///< the HIP has been outside the object since the (re)start
+  bool valid = false;   ///< false: next tick starts the proxy at the HIP (start-up, reset)
 };
 
 /// What one tick produced.
@@ -86,23 +101,66 @@ struct TickResult {
   GridPos proxy;
   std::array<fixed::Newtons, 3> force{};  ///< eq. 10: f = −k (X_h − X_p), clamped
   std::int32_t penetration_q16 = 0;       ///< |X_p − X_h| in voxels when in contact, else 0
-  bool contact = false;                   ///< proxy held apart from the HIP by the surface
+  bool contact = false;                   ///< a non-zero force: the surface holds the proxy from the HIP
   bool clamped = false;                   ///< |f| hit max_force
-  int iterations = 0;                     ///< samples taken (phase 1 + phase 2)
+  bool converged = false;                 ///< eq. 9 reached its fixed point (update ≤ tolerance)
+  int iterations = 0;                     ///< field samples taken, ≤ max_iterations
 };
 
-/// One servo tick of the proxy (paper eq. 9, 10). RT-safe, bounded.
+/// One servo tick of the proxy (paper eq. 9, 10). RT-safe, bounded: at most max_iterations field
+/// samples and a fixed amount of arithmetic per sample.
 ///
-/// Phase 1 (free motion): sphere-traces from X_p towards X_h with steps φ(X_p)/√3, which cannot
-/// cross φ = 0 for a field whose neighbour differences are ≤ 1 voxel; reaching X_h ends the tick
-/// with zero force (exactly). Phase 2 (contact): iterates eq. 9,
-///   X_p ← X_p − γ (X_p − X_h) − β φ(X_p) ∇φ(X_p) / |∇φ(X_p)|²,
-/// as two half-steps (the γ step, capped at max_step, then the φ step evaluated at the moved
-/// point, only where φ < 0). Normalising by |∇φ|² makes β = 1 a Gauss–Newton projection onto
-/// φ = 0, so the iteration converges to the constrained minimum of eq. 5 (proxy on the surface,
-/// nearest to the HIP) rather than the penalty minimum of eq. 6, whose proxy sinks by
-/// penetration/λ. Stops when no component moves more than `tolerance` or after max_iterations.
-/// Force: f = k·h·(X_p − X_h), magnitude clamped to max_force with its direction kept.
+/// Invariant (the no-tunnelling guarantee): every point of the proxy's path, over all ticks, has
+/// φ > −δ, and the proxy rests only where φ ≥ −δ/2. Each move is a straight segment [a, b]
+/// accepted only if φ(a) + φ(b) + 2δ ≥ Λ·|b − a|, where Λ bounds |∇φ·(b−a)/|b−a|| over the whole
+/// grid (min of the field's Lipschitz norm and Σ|d_i|·max|∂_iφ|, see sampler::LipschitzBound):
+/// then φ ≥ (φ(a) + φ(b) − Λ|b−a|)/2 ≥ −δ all along it. A part whose interior reaches φ ≤ −δ
+/// across its whole cross-section (a 2-voxel plate reaches −1/2) cannot be crossed.
+///
+/// Free motion (φ(X_p) > 1/2 voxel): move to X_h without a sample if it lies in the ball where
+/// φ > 1/2 (carrying a lower bound of φ), else jump to X_h if [X_p, X_h] is certified and
+/// φ(X_h) > 0, else sphere-trace towards X_h in steps of φ/Λ (which never reach φ = 0).
+/// Near the surface: eq. 9 in projected, normalised form,
+///   X_p ← X_p + γ P_T (X_h − X_p) − β φ(X_p) ∇φ / |∇φ|²,   P_T = I − ∇φ∇φᵀ/|∇φ|²,
+/// i.e. with γ = β = 1 the projection of X_h onto the surface linearised at X_p (Gauss–Newton).
+/// Projecting the HIP term onto the tangent plane and normalising the φ term makes the fixed
+/// point the constrained minimum of eq. 5 (proxy on φ = 0 nearest the HIP), not the penalty
+/// minimum of eq. 6. A move runs in pieces: the first carries the normal part and as much of the
+/// tangential one as φ(X_p) + 3δ/2 allows, each further piece 3δ/2/Λ more; every piece end is
+/// sampled and every piece certified, a failing piece ends the move (the next is halved). Caps:
+/// max_iterations samples (hard); the tick settles after settle_samples unless the proxy lags a
+/// fast HIP; gradient_samples of them read ∇φ. Convergence test: a move (or computed update) of
+/// |Δ|₁ ≤ tolerance ends the iteration. If the HIP is outside both the linearisation and the
+/// field, the proxy moves towards it instead (leaving contact).
+/// Friction (μs > 0, CHAI3D-style cone): the proxy sticks while its tangential offset from the
+/// HIP is ≤ μs × depth, and otherwise slides to the edge of the μd cone.
+/// Force (eq. 10): f = k·h·(X_p − X_h) when the proxy is at the surface (φ ≤ 1/2 voxel) and the
+/// HIP is behind it; zero otherwise (free space, or a proxy still catching up). Magnitude clamped
+/// to max_force with its direction kept. A proxy started inside the object follows the HIP with
+/// zero force until the HIP has been outside once.
 TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+
+/// Passivity observer (Hannaford & Ryu 2002) for the sampled spring of eq. 10. Call Update once
+/// per tick with the tick's HIP and result. RT-safe, integer only.
+///
+///   energy_q32  E_n = −Σ_{m<n} f_m · (X_h,m+1 − X_h,m)   energy the user put into the virtual
+///               environment, the force f_m held over the period (zero-order hold)
+///   zoh_bound_q32  B_n = (k·h/2) Σ_{m<n} |Δu_m|²,  u = X_h − X_p   the most a sampled spring can
+///               give back beyond what it stored: for a frictionless proxy at its constrained
+///               minimum E_n = V_n + B'_n − B_n with V, B' ≥ 0 (docs/realtime-core.md § Passivity),
+///               so E_n ≥ −B_n: E going below −B_n flags an active (energy-generating) tick.
+/// Both in Q32.32 N·voxel (multiply by voxel_m for joules), saturating.
+struct PassivityObserver {
+  std::int64_t energy_q32 = 0;
+  std::int64_t zoh_bound_q32 = 0;
+  GridPos last_hip;
+  std::array<std::int64_t, 3> last_u{};  ///< X_h − X_p of the last tick's spring, Q16.16 voxels
+  std::array<std::int32_t, 3> last_force{};
+  bool primed = false;
+
+  void Update(GridPos hip, const TickResult& r, const ProxyParams& params);
+  double EnergyJ(double voxel_m) const { return static_cast<double>(energy_q32) / 4294967296.0 * voxel_m; }
+  double ZohBoundJ(double voxel_m) const { return static_cast<double>(zoh_bound_q32) / 4294967296.0 * voxel_m; }
+};
 
 }  // namespace palpa::proxy

@@ -1,0 +1,258 @@
+#include "float64_proxy.h"
+
+namespace palpa::bench {
+
+double Float64Field::Phi(const Vec3d& x) const { return PhiInline(x); }
+
+Float64Sample Float64Field::At(const Vec3d& x) const { return AtInline(x); }
+
+namespace {
+
+using detail::AxisVariation;
+using detail::Certified;
+using detail::Dot;
+using detail::Len;
+using detail::Sub;
+
+Vec3d Add(const Vec3d& a, const Vec3d& b, double s = 1) { return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]}; }
+double L1(const Vec3d& a) { return std::abs(a[0]) + std::abs(a[1]) + std::abs(a[2]); }
+
+}  // namespace
+
+// The same steps as proxy.cc (free fast path, free motion, contact pieces, leaving, force), in
+// double, without the fixed point's overflow guards, rounding slack and HIP clamping.
+Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, Float64State& st, const Vec3d& h) {
+  Float64Result r;
+  const double delta = prm.delta;
+  const double piece = 1.5 * delta;
+  bool phi_h_known = false;
+  double phi_h = 0;
+  int samples = 0;
+  if (st.valid && st.seated && st.phi > prm.near) {
+    const Vec3d d = Sub(h, st.proxy);
+    const double reach = AxisVariation(d, field);
+    if (reach < st.phi - prm.near) {
+      st.phi -= reach;
+      st.proxy = h;
+      st.last_hip = h;
+      st.grad_valid = false;
+      r.proxy = h;
+      return r;
+    }
+    phi_h = field.Phi(h);
+    phi_h_known = true;
+    samples = 1;
+    if (phi_h > 0 && Certified(st.phi, phi_h, d, field, delta)) {
+      st.proxy = h;
+      st.last_hip = h;
+      st.phi = phi_h;
+      st.grad_valid = false;
+      r.proxy = h;
+      r.iterations = 1;
+      return r;
+    }
+  }
+  if (!st.valid || !st.seated) {
+    const double ph = field.Phi(h);
+    st = {h, ph, {}, h, false, ph >= 0, true};
+    r.proxy = h;
+    r.iterations = 1;
+    return r;
+  }
+  const bool fast = AxisVariation(Sub(h, st.last_hip), field) > prm.settle_samples * piece;
+  Vec3d p = st.proxy;
+  double phi_p = st.phi;
+  Vec3d g = st.grad;
+  bool grad_valid = st.grad_valid;
+  int halvings = 0, gradient_samples = 0;
+  const int max_samples = prm.max_iterations;
+  for (int pass = 0; pass < 2 * max_samples + 2 && samples < max_samples && p != h; ++pass) {
+    if (phi_p > prm.near) {  // free motion
+      if (!phi_h_known) {
+        phi_h = field.Phi(h);
+        phi_h_known = true;
+        ++samples;
+        continue;
+      }
+      const Vec3d d = Sub(h, p);
+      if (phi_h > 0 && Certified(phi_p, phi_h, d, field, delta)) {
+        p = h;
+        phi_p = phi_h;
+        grad_valid = false;
+        break;
+      }
+      const double len = Len(d);
+      const double rate = std::min(field.norm(), AxisVariation(d, field) / len);
+      const double step = rate == 0 ? len : phi_p / rate;
+      if (step >= len) {
+        p = h;
+        phi_p = phi_h;
+        grad_valid = false;
+        break;
+      }
+      p = Add(p, d, step / len);
+      phi_p = field.Phi(p);
+      grad_valid = false;
+      ++samples;
+      continue;
+    }
+    if (!grad_valid) {
+      const Float64Sample s = field.At(p);
+      phi_p = s.phi;
+      g = s.grad;
+      grad_valid = true;
+      ++samples;
+      ++gradient_samples;
+      continue;
+    }
+    const double gg = Dot(g, g);
+    if (gg < 1.0 / 16) break;
+    // Contact iterations.
+    bool lagging = false, done = false, leave = false;
+    while (samples < max_samples && (samples < prm.settle_samples || lagging)) {
+      const Vec3d d = Sub(h, p);
+      const double gg_now = Dot(g, g);
+      if (gg_now < 1.0 / 16) {
+        done = true;
+        break;
+      }
+      const double c = phi_p + Dot(d, g);
+      if (c >= 0) {
+        if (!phi_h_known) {
+          phi_h = field.Phi(h);
+          phi_h_known = true;
+          ++samples;
+        }
+        if (phi_h >= 0) {
+          leave = true;
+          break;
+        }
+      }
+      const Vec3d dn = {-prm.beta * phi_p / gg_now * g[0], -prm.beta * phi_p / gg_now * g[1],
+                        -prm.beta * phi_p / gg_now * g[2]};
+      const double along = Dot(d, g) / gg_now;
+      Vec3d dt = {prm.gamma * (d[0] - along * g[0]), prm.gamma * (d[1] - along * g[1]),
+                  prm.gamma * (d[2] - along * g[2])};
+      if (prm.mu_s > 0) {
+        const double t_len = Len(dt), depth = std::max(0.0, -c / std::sqrt(gg_now));
+        if (t_len <= prm.mu_s * depth) {
+          dt = {};
+        } else {
+          const double keep = (t_len - prm.mu_d * depth) / t_len;
+          dt = {dt[0] * keep, dt[1] * keep, dt[2] * keep};
+        }
+      }
+      if (L1(dn) + L1(dt) <= prm.tolerance) {
+        r.converged = true;
+        done = true;
+        break;
+      }
+      const double dn_variation = AxisVariation(dn, field);
+      double dt_variation = AxisVariation(dt, field);
+      const double first_room = std::max(0.0, phi_p + piece - dn_variation);
+      if (dt_variation > first_room && field.norm_helps())
+        dt_variation = std::min(dt_variation, field.norm() * Len(dt));
+      if (halvings > 0) {
+        const double s = std::ldexp(1.0, -halvings);
+        dt = {dt[0] * s, dt[1] * s, dt[2] * s};
+        dt_variation *= s;
+      }
+      lagging = dt_variation > first_room && (fast || dt_variation > first_room + 4 * piece);
+      const int room = (lagging ? max_samples : std::min(prm.settle_samples, max_samples)) - samples;
+      if (room <= 0) break;
+      double reached = 0;
+      Vec3d e = p;
+      bool moved = false, left = false;
+      for (int j = 0; j < room; ++j) {
+        const double reach = std::min(dt_variation, j == 0 ? first_room : reached + piece);
+        if (j > 0 && reach <= reached) break;
+        const double f = dt_variation > 0 ? std::min(1.0, reach / dt_variation) : 1.0;
+        const Vec3d q = Add(Add(p, dn), dt, f);
+        if (q == e) break;
+        const bool last = j == room - 1 || reach >= dt_variation;
+        const bool with_gradient = last && gradient_samples < prm.gradient_samples;
+        Float64Sample s;
+        if (with_gradient) {
+          s = field.At(q);
+          ++gradient_samples;
+        } else {
+          s.phi = field.Phi(q);
+        }
+        ++samples;
+        const double need = phi_p + s.phi + 2 * delta;
+        const double piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
+        if (!(s.phi >= -delta / 2 && need >= 0 &&
+              (piece_variation <= need || Certified(phi_p, s.phi, Sub(q, e), field, delta)))) {
+          break;
+        }
+        e = q;
+        reached = reach;
+        moved = true;
+        phi_p = s.phi;
+        if (with_gradient) g = s.grad;
+        if (phi_p > prm.near) {
+          left = true;
+          break;
+        }
+      }
+      if (moved) {
+        const bool small = L1(Sub(e, p)) <= prm.tolerance;
+        p = e;
+        halvings = 0;
+        if (left) break;
+        if (small) {
+          r.converged = true;
+          done = true;
+          break;
+        }
+      } else if (++halvings > 16) {
+        done = true;
+        break;
+      }
+    }
+    if (leave) {
+      const Vec3d d = Sub(h, p);
+      const double scale = std::ldexp(1.0, -halvings);
+      const Vec3d q = Add(p, d, scale);
+      if (q == p) break;
+      double phi_q = phi_h;
+      if (q != h) {
+        phi_q = field.Phi(q);
+        ++samples;
+      }
+      if (phi_q >= -delta / 2 && Certified(phi_p, phi_q, Sub(q, p), field, delta)) {
+        p = q;
+        phi_p = phi_q;
+        grad_valid = false;
+        halvings = 0;
+      } else if (++halvings > 16) {
+        break;
+      }
+      continue;
+    }
+    if (done || phi_p <= prm.near) break;  // budget, convergence or nothing to do; else free motion
+  }
+  st.proxy = p;
+  st.last_hip = h;
+  st.phi = phi_p;
+  st.grad = g;
+  st.grad_valid = grad_valid;
+  r.proxy = p;
+  r.iterations = samples;
+  if (p == h) return r;
+  bool behind = false;
+  if (grad_valid) {
+    behind = phi_p + Dot(Sub(h, p), g) < 0;
+  } else if (phi_h_known) {
+    behind = phi_h < 0;
+  }
+  if (phi_p > prm.near || !behind) return r;
+  const Vec3d u = Sub(p, h);
+  const double len = Len(u);
+  const double scale = prm.k * len > prm.max_force ? prm.max_force / len : prm.k;
+  r.force = {u[0] * scale, u[1] * scale, u[2] * scale};
+  r.contact = r.force != Vec3d{};
+  return r;
+}
+
+}  // namespace palpa::bench
