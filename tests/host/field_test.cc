@@ -197,7 +197,8 @@ SphereCase BuildSphere926(int cells) {
   const PointSet device = ApplyTransform(fit, *points);
   BuildOptions options;
   options.grid.cells = cells;
-  auto build = BuildErosionField(device.positions, device.normals, options);
+  options.method = FieldMethod::kErosion;
+  auto build = BuildField(device.positions, device.normals, options);
   EXPECT_TRUE(build.has_value()) << build.error().message;
   return SphereCase{std::move(*build), fit.Apply(Eigen::Vector3d::Zero()), 10.0 * fit.scale};
 }
@@ -263,8 +264,8 @@ UnionExtent MeasureUnion(const Packing& packing, const Eigen::Vector3d& centre) 
 
 void CheckSphere(int cells) {
   const SphereCase sphere = BuildSphere926(cells);
-  const DenseField& field = sphere.build.field;
-  const GridSpec& grid = field.grid;
+  const GridSpec& grid = sphere.build.field.grid();
+  DenseField field{grid, sphere.build.field.ToDense(), sphere.build.inside_nodes};
   const double h = grid.voxel_m;
   const double band = grid.band_voxels;
   const UnionExtent extent = MeasureUnion(sphere.build.packing, sphere.centre);
@@ -320,36 +321,37 @@ TEST(Sphere926, FieldWithinErosionBound300Cells) { CheckSphere(300); }
 
 // --- Determinism, API, timings ---------------------------------------------------------------
 
-TEST(BuildErosionField, OneAndTwoThreadsGiveIdenticalFields) {
+TEST(BuildField, ErosionOneAndTwoThreadsGiveIdenticalFields) {
   const auto points = ReadPoints(DataFile("kitten.xyz"));
   ASSERT_TRUE(points.has_value()) << points.error().message;
   const PointSet device = ApplyTransform(FitTransform(*points, 0.06), *points);
   BuildOptions options;
   options.grid.cells = 120;
+  options.method = FieldMethod::kErosion;
   const auto build_with = [&](std::size_t threads) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-    auto result = BuildErosionField(device.positions, device.normals, options);
+    auto result = BuildField(device.positions, device.normals, options);
     EXPECT_TRUE(result.has_value());
     return std::move(*result);
   };
   const BuildResult one = build_with(1);
   const BuildResult two = build_with(2);
   EXPECT_EQ(one.packing.radii, two.packing.radii);
-  EXPECT_EQ(one.field.phi_voxels, two.field.phi_voxels);
-  EXPECT_EQ(one.field.inside_nodes, two.field.inside_nodes);
-  EXPECT_GT(one.field.inside_nodes, 0u);
+  EXPECT_EQ(one.field.ToDense(), two.field.ToDense());
+  EXPECT_EQ(one.inside_nodes, two.inside_nodes);
+  EXPECT_GT(one.inside_nodes, 0u);
 }
 
-TEST(BuildErosionField, ErrorsAndProgress) {
+TEST(BuildField, ErrorsAndProgress) {
   const std::vector<Eigen::Vector3d> p = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   const std::vector<Eigen::Vector3d> n = {{-1, -1, -1}, {2, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  EXPECT_FALSE(BuildErosionField(p, {n.begin(), n.end() - 1}, {}).has_value());
+  EXPECT_FALSE(BuildField(p, {n.begin(), n.end() - 1}, {}).has_value());
   auto bad_normal = n;
   bad_normal[2] = Eigen::Vector3d::Zero();
-  EXPECT_FALSE(BuildErosionField(p, bad_normal, {}).has_value());
+  EXPECT_FALSE(BuildField(p, bad_normal, {}).has_value());
   BuildOptions bad_grid;
   bad_grid.grid.cells = 10;
-  const auto grid_error = BuildErosionField(p, n, bad_grid);
+  const auto grid_error = BuildField(p, n, bad_grid);
   ASSERT_FALSE(grid_error.has_value());
   EXPECT_NE(grid_error.error().message.find("cells"), std::string::npos);
 
@@ -358,7 +360,7 @@ TEST(BuildErosionField, ErrorsAndProgress) {
   bool other_thread = false;
   BuildOptions small;
   small.grid.cells = 60;
-  const auto ok = BuildErosionField(p, n, small, [&](double f) {
+  const auto ok = BuildField(p, n, small, [&](double f) {
     reported.push_back(f);
     other_thread = other_thread || std::this_thread::get_id() != caller;
   });
@@ -369,24 +371,25 @@ TEST(BuildErosionField, ErrorsAndProgress) {
   EXPECT_GE(reported.front(), 0.0);
   EXPECT_EQ(reported.back(), 1.0);
   EXPECT_EQ(ok->transform.scale, 1.0);
-  EXPECT_GT(ok->field.inside_nodes, 0u);
+  EXPECT_GT(ok->inside_nodes, 0u);
 }
 
-TEST(BuildErosionField, KittenTimings300Cells) {
+TEST(BuildField, ErosionKittenTimings300Cells) {
   const auto points = ReadPoints(DataFile("kitten.xyz"));
   ASSERT_TRUE(points.has_value()) << points.error().message;
   const PointSet device = ApplyTransform(FitTransform(*points, 0.06), *points);
   BuildOptions options;
   options.grid.cells = 300;
-  const auto build = BuildErosionField(device.positions, device.normals, options);
+  options.method = FieldMethod::kErosion;
+  const auto build = BuildField(device.positions, device.normals, options);
   ASSERT_TRUE(build.has_value()) << build.error().message;
-  const GridSpec& g = build->field.grid;
+  const GridSpec& g = build->field.grid();
   std::printf(
       "[ kitten 300 cells ] %zu points, grid %dx%dx%d, %zu inside nodes; packing %.3f s, "
       "indicator %.3f s, distance %.3f s (threads: %u)\n",
-      device.positions.size(), g.dims[0], g.dims[1], g.dims[2], build->field.inside_nodes, build->seconds_packing,
+      device.positions.size(), g.dims[0], g.dims[1], g.dims[2], build->inside_nodes, build->seconds_packing,
       build->seconds_indicator, build->seconds_distance, std::thread::hardware_concurrency());
-  EXPECT_GT(build->field.inside_nodes, 0u);
+  EXPECT_GT(build->inside_nodes, 0u);
 }
 
 }  // namespace

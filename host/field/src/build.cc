@@ -7,6 +7,9 @@
 
 #include <fmt/format.h>
 
+#include "palpa/field/edt_field.h"
+#include "palpa/field/erosion_field.h"
+#include "palpa/field/hermite_field.h"
 #include "palpa/field/indicator.h"
 
 namespace palpa::field {
@@ -60,30 +63,60 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     hi = hi.cwiseMax(p);
   }
   const double r_max = (hi - lo).maxCoeff();
+  result.orientation = CheckOrientation(device_positions, unit_normals);
 
-  auto start = std::chrono::steady_clock::now();
-  result.packing = PackSpheres(device_positions, unit_normals, r_max);
-  result.seconds_packing = SecondsSince(start);
-  report(kProgressPacked);
+  if (options.method == FieldMethod::kHermite) {
+    HermiteStats& stats = result.hermite;
+    HermiteOptions hermite_options;
+    hermite_options.leak_guard = options.leak_guard;
+    result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
+    result.packing = std::move(stats.inner);
+    stats.inner = {};
+    stats.outer = {};
+    result.balls_shrunk = stats.inner_balls_shrunk + stats.outer_balls_shrunk;
+    result.seconds_packing = stats.seconds_packing;
+    result.seconds_distance = stats.seconds_distance;
+  } else {
+    auto start = std::chrono::steady_clock::now();
+    result.packing = PackSpheres(device_positions, unit_normals, r_max);
+    result.seconds_packing = SecondsSince(start);
+    report(kProgressPacked);
 
-  start = std::chrono::steady_clock::now();
-  const std::vector<std::uint8_t> indicator = Indicator(*grid, result.packing);
-  result.seconds_indicator = SecondsSince(start);
-  report(kProgressIndicator);
+    start = std::chrono::steady_clock::now();
+    const std::vector<std::uint8_t> indicator = Indicator(*grid, result.packing);
+    result.seconds_indicator = SecondsSince(start);
+    report(kProgressIndicator);
 
-  start = std::chrono::steady_clock::now();
-  result.field = ErosionField(*grid, indicator);
-  result.seconds_distance = SecondsSince(start);
+    start = std::chrono::steady_clock::now();
+    if (options.method == FieldMethod::kEdt) {
+      result.field = SparseField::FromDense(*grid, SignedEdtField(*grid, indicator));
+    } else {
+      result.field = SparseField::FromDense(*grid, ErosionField(*grid, indicator).phi_voxels);
+    }
+    result.seconds_distance = SecondsSince(start);
+  }
+  result.inside_nodes = result.field.CountInside();
   report(1.0);
   return result;
 }
 
 }  // namespace
 
-std::expected<BuildResult, Error> BuildErosionField(const std::vector<Eigen::Vector3d>& device_positions,
-                                                    const std::vector<Eigen::Vector3d>& normals,
-                                                    const BuildOptions& options,
-                                                    std::function<void(double fraction)> progress) {
+std::string_view MethodName(FieldMethod method) {
+  switch (method) {
+    case FieldMethod::kErosion:
+      return "erosion";
+    case FieldMethod::kEdt:
+      return "edt";
+    case FieldMethod::kHermite:
+      return "hermite";
+  }
+  return "unknown";
+}
+
+std::expected<BuildResult, Error> BuildField(const std::vector<Eigen::Vector3d>& device_positions,
+                                             const std::vector<Eigen::Vector3d>& normals, const BuildOptions& options,
+                                             std::function<void(double fraction)> progress) {
   // Keep the API exception-free: allocation of a large grid, or a throwing callback, ends here.
   try {
     return Build(device_positions, normals, options, progress);

@@ -84,7 +84,7 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
     return Fail("voxel_m", offsetof(HeaderV1, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
   if (h.band_voxels < 1 || h.band_voxels > kMaxBandVoxels)
     return Fail("band_voxels", offsetof(HeaderV1, band_voxels), "%u, allowed 1..%u", h.band_voxels, kMaxBandVoxels);
-  if (h.method != static_cast<std::uint32_t>(Method::kErosion))
+  if (h.method < static_cast<std::uint32_t>(Method::kErosion) || h.method > static_cast<std::uint32_t>(Method::kHermite))
     return Fail("method", offsetof(HeaderV1, method), "%u is unknown", h.method);
   if (h.reserved0 != 0) return Fail("reserved0", offsetof(HeaderV1, reserved0), "must be zero");
   if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))

@@ -1,42 +1,61 @@
-// One-call pipeline: packing (paper §3.1) -> indicator -> erosion distance field (§3.2).
+// One-call pipeline: oriented points in device metres -> narrow-band signed distance field, by
+// one of three methods (issue 5; docs/field-methods.md compares them):
+//   kHermite (default): osculating quadrics of the oriented points, clamped by the guarded
+//     packed-ball bracket (hermite_field.h); sparse, sub-voxel.
+//   kEdt: packing (paper §3.1) -> indicator -> exact signed Euclidean distance transform.
+//   kErosion: packing -> indicator -> erosion (paper §3.2 eq. 4), the reference.
 #pragma once
 
 #include <expected>
 #include <functional>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
 
-#include "palpa/field/erosion_field.h"
 #include "palpa/field/error.h"
 #include "palpa/field/grid.h"
+#include "palpa/field/hermite_field.h"
+#include "palpa/field/orientation.h"
 #include "palpa/field/packing.h"
+#include "palpa/field/sparse_field.h"
 #include "palpa/field/transform.h"
 
 namespace palpa::field {
 
+enum class FieldMethod { kErosion, kEdt, kHermite };
+
+// "erosion", "edt", "hermite".
+std::string_view MethodName(FieldMethod method);
+
 struct BuildOptions {
   GridOptions grid;
+  FieldMethod method = FieldMethod::kHermite;
+  // kHermite: the leak guard (hermite_field.h). erosion and edt always use the paper's raw packing.
+  bool leak_guard = true;
 };
 
 struct BuildResult {
-  DenseField field;
-  Transform transform;  // identity: the caller passed device (already fitted) positions
-  Packing packing;      // metres
+  SparseField field;              // voxels, negative inside, clamped to +-band
+  Transform transform;            // identity: the caller passed device (already fitted) positions
+  Packing packing;                // metres; for kHermite the guarded inner balls
+  std::size_t inside_nodes = 0;   // nodes with phi <= 0
+  std::size_t balls_shrunk = 0;   // kHermite: inner + outer balls shrunk by the leak guard
+  HermiteStats hermite;           // kHermite: the method's counters (its packings moved to `packing`)
+  OrientationReport orientation;  // every method: are the normals consistently outward?
   double seconds_packing = 0.0;
-  double seconds_indicator = 0.0;
+  double seconds_indicator = 0.0;  // kErosion, kEdt only
   double seconds_distance = 0.0;
 };
 
-// Builds the erosion field of oriented points already in device coordinates (metres; see
-// FitTransform). Packing uses r_max = longest bounding-box side of `device_positions`.
-// Normals are normalised here. `progress`, if set, is called on the calling thread only with
-// non-decreasing values in [0, 1], ending with 1.
+// Builds the field of oriented points already in device coordinates (metres; see FitTransform).
+// Packing uses r_max = longest bounding-box side of `device_positions`. Normals are normalised
+// here. `progress`, if set, is called on the calling thread only with non-decreasing values in
+// [0, 1], ending with 1. Deterministic: any thread count gives bit-identical fields.
 // Errors: size mismatch; fewer than 4 points; non-finite position; zero or non-finite normal;
 // any MakeGrid error; out of memory.
-std::expected<BuildResult, Error> BuildErosionField(const std::vector<Eigen::Vector3d>& device_positions,
-                                                    const std::vector<Eigen::Vector3d>& normals,
-                                                    const BuildOptions& options,
-                                                    std::function<void(double fraction)> progress = {});
+std::expected<BuildResult, Error> BuildField(const std::vector<Eigen::Vector3d>& device_positions,
+                                             const std::vector<Eigen::Vector3d>& normals, const BuildOptions& options,
+                                             std::function<void(double fraction)> progress = {});
 
 }  // namespace palpa::field

@@ -31,6 +31,8 @@ inline constexpr std::uint32_t kMaxBandVoxels = 64;
 /// How the field was built (palpa build --method).
 enum class Method : std::uint32_t {
   kErosion = 1,  ///< paper §3.2 eq. 4, both sides
+  kEdt = 2,      ///< exact signed Euclidean distance transform of the packing indicator
+  kHermite = 3,  ///< sub-voxel: osculating quadrics clamped by the packed-ball bracket (default)
 };
 
 /// The v1 header exactly as stored (little-endian target asserted in palpa/fixed/q.h).

@@ -1,0 +1,138 @@
+#!/usr/bin/python3
+"""Runs the field speed/scale measurements of issue 5 in one go and prints Markdown tables.
+
+Called by bench/field/run.sh (which builds the binaries). Uses only Debian's python3-numpy and
+python3-scipy. Times are wall-clock minima over --repeat runs; peak RSS is the maximum.
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+import numpy as np
+import scipy
+from scipy import ndimage
+
+KITTEN = "data/kitten.xyz"
+
+
+def run_timed(cmd):
+    """Runs cmd under /usr/bin/time -v; returns (wall s, peak RSS bytes, stdout)."""
+    p = subprocess.run(["/usr/bin/time", "-v"] + cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit(f"failed: {' '.join(cmd)}\n{p.stderr}")
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (?:(\d+):)?(\d+):([\d.]+)", p.stderr)
+    h, m, s = wall.group(1), wall.group(2), wall.group(3)
+    seconds = (int(h) * 3600 if h else 0) + int(m) * 60 + float(s)
+    rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", p.stderr).group(1)) * 1024
+    return seconds, rss, p.stdout
+
+
+def build(args, cells, out, extra=()):
+    walls, rss = [], 0
+    for _ in range(args.repeat):
+        w, r, _ = run_timed([args.palpa, "build", KITTEN, "-o", out, "--cells", str(cells), "-q", *extra])
+        walls.append(w)
+        rss = max(rss, r)
+    return min(walls), rss
+
+
+def info(args, blob):
+    return json.loads(subprocess.run([args.palpa, "info", "--json", blob], capture_output=True, text=True,
+                                     check=True).stdout)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--palpa", required=True)
+    ap.add_argument("--bench-bin", required=True)
+    ap.add_argument("--work", required=True)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    os.makedirs(args.work, exist_ok=True)
+    load_before = os.getloadavg()
+    print(f"load average before: {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f} "
+          f"({os.cpu_count()} CPUs); scipy {scipy.__version__}, numpy {np.__version__}")
+
+    # Whole palpa build, kitten, 150/300/600 cells (interleaved with scipy below in one run).
+    rows = {}
+    for cells in (150, 300, 600):
+        blob = os.path.join(args.work, f"kitten{cells}.palpa")
+        wall, rss = build(args, cells, blob)
+        meta = info(args, blob)
+        rows[cells] = dict(wall=wall, rss=rss, dims=meta["dims"], blob=meta["blob_bytes"])
+
+    # scipy's EDT alone on the 300-cell grid: one Euclidean transform of the outside mask of the
+    # field palpa built (excluding reading it), the least a dense EDT method must do.
+    npy = os.path.join(args.work, "kitten300.npy")
+    subprocess.run([args.palpa, "export", os.path.join(args.work, "kitten300.palpa"), "--npy", npy], check=True,
+                   capture_output=True)
+    outside = np.load(npy) > 0
+    scipy_times = []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        ndimage.distance_transform_edt(outside)
+        scipy_times.append(time.perf_counter() - t0)
+    scipy_s = min(scipy_times)
+
+    # 1 vs 2 threads, whole build at 300 cells.
+    threads = {t: build(args, 300, os.path.join(args.work, f"kitten300-t{t}.palpa"), ("--threads", str(t)))[0]
+               for t in (1, 2)}
+
+    # Stage times.
+    stages = {}
+    for cells in (150, 300, 600):
+        for t in (1, 2):
+            out = subprocess.run([os.path.join(args.bench_bin, "palpa_field_stages"), KITTEN, str(cells), "--threads",
+                                  str(t), "--repeat", str(args.repeat)], capture_output=True, text=True, check=True)
+            stages[(cells, t)] = json.loads(out.stdout)
+
+    # Packing on cube.pwn.
+    out = subprocess.run([os.path.join(args.bench_bin, "palpa_field_bench"), "--benchmark_format=json",
+                          f"--benchmark_repetitions={args.repeat}", "--benchmark_report_aggregates_only=true"],
+                         capture_output=True, text=True, check=True)
+    packing = {}
+    for b in json.loads(out.stdout)["benchmarks"]:
+        if b.get("aggregate_name") == "mean":
+            packing[b["run_name"]] = b["real_time"] / 1e3  # ms -> s
+    load_after = os.getloadavg()
+
+    print()
+    print("| kitten (5,210 pts), whole `palpa build` | grid | wall (min of %d) | peak RSS | blob (dense int32 payload) |"
+          % args.repeat)
+    print("|---|---|---|---|---|")
+    for cells, r in rows.items():
+        d = r["dims"]
+        print(f"| {cells} cells | {d[0]}x{d[1]}x{d[2]} | {r['wall']:.3f} s | {r['rss'] / 2**20:.0f} MiB | "
+              f"{r['blob'] / 2**20:.1f} MiB |")
+    print()
+    print(f"- time(600)/time(300) = {rows[600]['wall'] / rows[300]['wall']:.2f}   (goal <= 5; a dense method pays 8)")
+    print(f"- scipy.ndimage.distance_transform_edt alone, 300-cell grid: {scipy_s:.3f} s; "
+          f"palpa build / scipy = 1/{scipy_s / rows[300]['wall']:.2f}   (goal: scipy >= 2x palpa)")
+    print(f"- palpa build, 300 cells: 1 thread {threads[1]:.3f} s, 2 threads {threads[2]:.3f} s "
+          f"(speed-up {threads[1] / threads[2]:.2f}x)")
+    print()
+    print("| stage times (s), kitten | cells | threads | total | packing | patches | centre tests | evaluation |"
+          " projection | bricks | added | projection allocs |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for (cells, t), s in stages.items():
+        print(f"| | {cells} | {t} | {s['wall_s']:.3f} | {s['packing_s']:.3f} | {s['patches_s']:.3f} | "
+              f"{s['active_s']:.3f} | {s['evaluate_s']:.3f} | {s['project_s']:.3f} | {s['allocated_bricks']} | "
+              f"{s['bricks_added']} | {s['bricks_allocated_by_projection']} |")
+    print()
+    print("| packing (eq. 2-3), cube.pwn fitted to 0.06 m | points | threads | time (mean of %d) |" % args.repeat)
+    print("|---|---|---|---|")
+    for name, seconds in packing.items():
+        m = re.match(r"BM_(\w+?)(?:/every:(\d+))?(?:/threads:(\d+))?/real_time", name)
+        kind, every, t = m.group(1), m.group(2) or "10", m.group(3) or "1"
+        points = 50000 if every == "1" else 5000
+        print(f"| {kind} | {points:,} | {t} | {seconds:.3f} s |")
+    print()
+    print(f"load average after: {load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

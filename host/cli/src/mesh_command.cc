@@ -1,0 +1,53 @@
+// palpa mesh: the zero iso-surface of a field as a triangle mesh (.ply or .obj).
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+
+#include <fmt/core.h>
+
+#include "atomic_file.h"
+#include "commands.h"
+#include "palpa/mesh/field_file.h"
+#include "palpa/mesh/iso_surface.h"
+
+namespace palpa::cli {
+
+int RunMesh(const MeshArgs& args) {
+  std::string ext = std::filesystem::path(args.output).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext != ".ply" && ext != ".obj") {
+    fmt::print(stderr, "palpa mesh: {}: unknown extension '{}'; use .ply or .obj\n", args.output, ext);
+    return kExitBadInput;
+  }
+  auto field = mesh::LoadField(args.field);
+  if (!field) {
+    fmt::print(stderr, "palpa mesh: {}\n", field.error().message);
+    return kExitBadInput;
+  }
+  auto surface = mesh::ExtractZeroSurface(field->view);
+  if (!surface) {
+    fmt::print(stderr, "palpa mesh: {}: {}\n", args.field, surface.error().message);
+    return kExitBadInput;
+  }
+  std::expected<void, std::string> written;
+  if (ext == ".ply") {
+    written = WriteFileAtomically(args.output, mesh::ToPly(*surface));
+  } else {
+    const std::string text = mesh::ToObj(*surface);
+    written = WriteFileAtomically(args.output, std::as_bytes(std::span(text)));
+  }
+  if (!written) {
+    fmt::print(stderr, "palpa mesh: {}\n", written.error());
+    return kExitIo;
+  }
+  if (!args.quiet) {
+    const bool closed = mesh::CheckClosedOriented(*surface, args.output).has_value();
+    fmt::print("{}: zero iso-surface, {} vertices, {} triangles, {}, area {:.1f} mm^2, volume {:.1f} mm^3 -> {}\n",
+               args.field, surface->vertices.size(), surface->faces.size(), closed ? "closed" : "NOT closed",
+               mesh::SurfaceArea(*surface) * 1e6, mesh::SignedVolume(*surface) * 1e9, args.output);
+  }
+  return kExitOk;
+}
+
+}  // namespace palpa::cli

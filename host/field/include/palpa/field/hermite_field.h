@@ -1,0 +1,88 @@
+// The default field method (`palpa build --method hermite`, issue 5): sub-voxel signed distances
+// in the narrow band, straight from the oriented points (Hermite data) and the packed balls.
+//
+// At a node x (docs/field-methods.md has the measurements that chose this):
+//  1. Osculating quadrics. Every sample P_i carries a height field z = A u^2 + B uv + C v^2 + b u
+//     + c v over its tangent frame (u, v, n_i), fitted by least squares to the positions and
+//     normals of its 16 nearest samples whose normals agree (n_i . n_j >= 0.8, so a patch never
+//     spans a sharp edge). Q(x) = inverse-distance^2 blend, over the 4 samples nearest x that agree
+//     with the nearest one, of (w - z(u, v)) / sqrt(1 + |grad z|^2): the distance to the patch to
+//     first order. Exact on planes, O(h^4) on spheres.
+//  2. Packed-ball bracket. Inner balls (paper eq. 2-3) lie inside the object and outer balls (the
+//     same packing with -n) outside it, so with U_in, U_out their unions, the true signed
+//     distance lies in [-f_out(x), f_in(x)], f(x) = min_i |x - c_i| - r_i over the balls of the
+//     48 samples nearest the centre of x's 8^3 brick (any subset of the balls gives valid
+//     bounds). phi = clamp(Q, lo - 0.1, hi + 0.1) voxels: the bracket removes the
+//     quadrics' far-field errors (the wrong side of a sharp edge) without touching their
+//     sub-voxel accuracy.
+//  3. Leak guard (paper Fig. 4): a ball tangent at P_i may not cross the tangent disc of another
+//     sample P_j (radius = P_j's 8th-neighbour spacing) by more than 0.25 voxel; such a ball is
+//     shrunk (still tangent at P_i) until it does not. Without it a ball pokes through the gaps of
+//     a sparse sampling and the bracket certifies a false inside.
+// Work follows the surface: only 8^3 bricks within band + spacing of a sample are evaluated (those
+// whose centre value says they can hold band nodes, plus any such brick that an evaluated node
+// below band - 1 faces). Inside each brick the candidate samples are culled exactly per brick,
+// 4^3 and 2^3 block (same values as with all 48), so a node costs a handful of distances; a block
+// that the bracket alone, or its centre value as for bricks, puts beyond the band is filled with
+// +-band at once. The other bricks are labelled by the sign of the evaluated nodes facing
+// them (SparseField::LabelUnallocatedBricks), and last SparseField::ProjectLipschitz makes every
+// axis neighbour difference <= 1 voxel, as the proxy's sphere tracing needs: the per-node formula
+// alone breaks that by up to ~2.5 voxels where patches meet or the bracket clamps.
+// Deterministic for any thread count (every node is computed independently, ties broken by
+// sample index; the projection's result does not depend on its order).
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "palpa/field/grid.h"
+#include "palpa/field/packing.h"
+#include "palpa/field/sparse_field.h"
+
+namespace palpa::field {
+
+struct HermiteOptions {
+  // Step 3 above. Off only to measure what it prevents (tests, docs/field-methods.md).
+  bool leak_guard = true;
+};
+
+struct HermiteStats {
+  std::size_t inner_balls_shrunk = 0;  // by the leak guard
+  std::size_t outer_balls_shrunk = 0;
+  std::size_t bricks_evaluated = 0;      // including bricks_added
+  std::size_t bricks_added = 0;          // evaluated because a neighbour's face was below band - 1
+  std::size_t label_minority_votes = 0;  // see SparseField::LabelUnallocatedBricks (0 expected)
+  SparseField::LipschitzStats lipschitz;
+  Packing inner;                  // guarded, metres
+  Packing outer;                  // guarded, metres (balls outside the object)
+  double seconds_packing = 0.0;   // spacing, inner and outer packing, leak guard
+  double seconds_distance = 0.0;  // everything after packing; of which:
+  double seconds_patches = 0.0;   //   osculating patch fits
+  double seconds_active = 0.0;    //   marking and centre tests
+  double seconds_evaluate = 0.0;  //   per-node evaluation (incl. added bricks)
+  double seconds_project = 0.0;   //   labelling and Lipschitz projection
+};
+
+// Distance to the kth nearest other sample of every sample (kth = 8, fewer if there are fewer
+// samples), in the units of `positions`. Deterministic.
+std::vector<double> SampleSpacing(const std::vector<Eigen::Vector3d>& positions, int kth = 8);
+
+// Leak guard (see above): shrinks the balls of `packing` (tangent at positions[i] with ball-side
+// normal -ball_normals[i], i.e. c_i = P_i - r_i * ball_normals[i]) so that no ball crosses the
+// tangent disc of radius disc_spacings * spacing[j] at any other sample P_j by more than
+// `tolerance` (same units). Discs of samples whose plane passes above P_i (concave there) are
+// not barriers. Returns the number of balls shrunk. Deterministic, parallel.
+std::size_t GuardPacking(Packing& packing, const std::vector<Eigen::Vector3d>& positions,
+                         const std::vector<Eigen::Vector3d>& ball_normals, const std::vector<double>& spacing,
+                         double disc_spacings, double tolerance);
+
+// The default method's field on `grid` from unit-normal oriented points in grid units (metres).
+// r_max caps the packed balls as in PackSpheres. Values in voxels, clamped to +-band, axis
+// neighbour differences <= SparseField::kLipschitzStep.
+SparseField HermiteField(const GridSpec& grid, const std::vector<Eigen::Vector3d>& positions,
+                         const std::vector<Eigen::Vector3d>& normals, double r_max, const HermiteOptions& options = {},
+                         HermiteStats* stats = nullptr);
+
+}  // namespace palpa::field

@@ -1,0 +1,794 @@
+#include "palpa/field/hermite_field.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <utility>
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+#include <nanoflann.hpp>
+
+namespace palpa::field {
+namespace {
+
+using V3 = Eigen::Vector3d;
+
+constexpr int kQuadricNeighbours = 16;
+constexpr double kQuadricAgreeCos = 0.8;  // neighbours (and blended patches) within ~37 degrees
+constexpr int kBlendPatches = 4;
+// Samples considered per 8^3 brick: the nearest to its centre. They hold every node's few nearest
+// samples, and their balls form the bracket (any subset of the balls gives valid bounds).
+constexpr std::size_t kBrickCandidates = 48;
+constexpr double kGuardDiscSpacings = 1.0;
+constexpr double kGuardToleranceVoxels = 0.25;
+constexpr float kBracketSlackVoxels = 0.1f;
+// Culling keeps candidates within this much of the bound (voxels): far above float rounding of
+// the distances (< 1e-4 voxel for balls of 1,000 voxels), so culled lists give the same values.
+constexpr float kCullSlackVoxels = 0.01f;
+// A block (brick, 4^3, 2^3) holds no band node when its centre value is beyond band + its
+// half-diagonal + this allowance for the estimate's own error. Such a block is filled with +-band;
+// a node that the formula would have put a little inside the band is then lowered by the
+// Lipschitz projection, never left as a jump.
+constexpr float kCentreTestMarginVoxels = 1.0f;
+
+struct PointCloud {
+  const std::vector<V3>* points;
+  std::size_t kdtree_get_point_count() const { return points->size(); }
+  double kdtree_get_pt(std::size_t idx, std::size_t dim) const {
+    return (*points)[idx][static_cast<Eigen::Index>(dim)];
+  }
+  template <class BBox>
+  bool kdtree_get_bbox(BBox& /*bb*/) const {
+    return false;
+  }
+};
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
+
+// nanoflann result set for GuardPacking's radius search: keeps, unsorted, the samples j != i within
+// the search radius whose plane the ball (centre, r) pokes through by more than `tolerance`.
+class CrossingResult {
+ public:
+  CrossingResult(double radius_sq, std::size_t i, const V3& centre, double r, double tolerance,
+                 const std::vector<V3>& positions, const std::vector<V3>& normals, std::vector<std::size_t>& out)
+      : radius_sq_(radius_sq),
+        i_(i),
+        centre_(centre),
+        r_(r),
+        tolerance_(tolerance),
+        positions_(positions),
+        normals_(normals),
+        out_(out) {}
+  void init() {}
+  void clear() {}
+  std::size_t size() const { return 0; }
+  bool full() const { return true; }
+  double worstDist() const { return radius_sq_; }
+  bool addPoint(double dist_sq, std::size_t j) {
+    if (dist_sq < radius_sq_ && j != i_ && normals_[j].dot(centre_ - positions_[j]) + r_ > tolerance_) {
+      out_.push_back(j);
+    }
+    return true;
+  }
+
+ private:
+  double radius_sq_;
+  std::size_t i_;
+  const V3& centre_;
+  double r_, tolerance_;
+  const std::vector<V3>& positions_;
+  const std::vector<V3>& normals_;
+  std::vector<std::size_t>& out_;
+};
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// k nearest samples of q, sorted by (distance, index) so that ties never depend on the tree.
+std::size_t Nearest(const KdTree& tree, const V3& q, std::size_t k, std::size_t* idx, double* d2,
+                    std::vector<std::pair<double, std::size_t>>& order) {
+  const std::size_t got = tree.knnSearch(q.data(), k, idx, d2);
+  order.resize(got);
+  for (std::size_t m = 0; m < got; ++m) order[m] = {d2[m], idx[m]};
+  std::sort(order.begin(), order.end());
+  for (std::size_t m = 0; m < got; ++m) {
+    d2[m] = order[m].first;
+    idx[m] = order[m].second;
+  }
+  return got;
+}
+
+// A sample's osculating patch in voxel units: frame (t1, t2, n) and z = A u^2 + B uv + C v^2 +
+// b u + c v, all float for the per-node loop.
+struct Patch {
+  std::array<float, 3> p, t1, t2, n;
+  float A, B, C, b, c;
+};
+
+Patch FitPatch(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals, std::size_t i,
+               double voxel) {
+  const V3& p = positions[i];
+  const V3& n = normals[i];
+  const V3 axis = std::abs(n.x()) < 0.9 ? V3(V3::UnitX()) : V3(V3::UnitY());
+  const V3 t1 = axis.cross(n).normalized();
+  const V3 t2 = n.cross(t1);
+  std::array<std::size_t, kQuadricNeighbours + 1> idx{};
+  std::array<double, kQuadricNeighbours + 1> d2{};
+  std::vector<std::pair<double, std::size_t>> order;
+  const std::size_t got = Nearest(tree, p, idx.size(), idx.data(), d2.data(), order);
+  using M5 = Eigen::Matrix<double, 5, 5>;
+  using V5 = Eigen::Matrix<double, 5, 1>;
+  M5 m = M5::Zero();
+  V5 r = V5::Zero();
+  int used = 0;
+  for (std::size_t a = 0; a < got; ++a) {
+    const std::size_t j = idx[a];
+    if (j == i) continue;
+    const V3& nj = normals[j];
+    const double nz = nj.dot(n);
+    if (nz < kQuadricAgreeCos) continue;
+    const V3 d = (positions[j] - p) / voxel;
+    const double u = d.dot(t1), v = d.dot(t2), w = d.dot(n);
+    // Position: z(u, v) = w. Normal: grad z = (-nj.t1, -nj.t2) / (nj.n), one voxel of slope
+    // residual weighing as one voxel of height.
+    V5 row;
+    row << u * u, u * v, v * v, u, v;
+    m += row * row.transpose();
+    r += row * w;
+    V5 du, dv;
+    du << 2 * u, v, 0, 1, 0;
+    dv << 0, u, 2 * v, 0, 1;
+    m += du * du.transpose();
+    r += du * (-nj.dot(t1) / nz);
+    m += dv * dv.transpose();
+    r += dv * (-nj.dot(t2) / nz);
+    ++used;
+  }
+  V5 sol = V5::Zero();
+  if (used >= 2) {
+    m.diagonal().array() += 1e-9;
+    const V5 s = m.ldlt().solve(r);
+    if (s.allFinite()) sol = s;
+  }
+  const auto f3 = [](const V3& v) {
+    return std::array<float, 3>{static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
+  };
+  return Patch{f3(p / voxel),
+               f3(t1),
+               f3(t2),
+               f3(n),
+               static_cast<float>(sol[0]),
+               static_cast<float>(sol[1]),
+               static_cast<float>(sol[2]),
+               static_cast<float>(sol[3]),
+               static_cast<float>(sol[4])};
+}
+
+// Signed distance to a patch (first order), voxels.
+inline float PatchDistance(const Patch& q, float x, float y, float z) {
+  const float dx = x - q.p[0], dy = y - q.p[1], dz = z - q.p[2];
+  const float u = dx * q.t1[0] + dy * q.t1[1] + dz * q.t1[2];
+  const float v = dx * q.t2[0] + dy * q.t2[1] + dz * q.t2[2];
+  const float w = dx * q.n[0] + dy * q.n[1] + dz * q.n[2];
+  const float h = q.A * u * u + q.B * u * v + q.C * v * v + q.b * u + q.c * v;
+  const float gu = 2 * q.A * u + q.B * v + q.b;
+  const float gv = q.B * u + 2 * q.C * v + q.c;
+  return (w - h) / std::sqrt(1 + gu * gu + gv * gv);
+}
+
+// Everything the per-node evaluation reads, in voxel units (floats).
+struct Model {
+  std::vector<Patch> patches;
+  std::vector<std::array<float, 4>> inner;  // centre, radius
+  std::vector<std::array<float, 4>> outer;
+};
+
+// Per-thread scratch: the candidate samples of a brick in structure-of-arrays form, so that the
+// loops over them vectorise.
+struct Scratch {
+  std::vector<std::size_t> idx;
+  std::vector<double> d2;
+  std::vector<std::pair<double, std::size_t>> order;
+  std::vector<std::uint32_t> sample;
+  std::vector<float> px, py, pz, ix, iy, iz, ir, ox, oy, oz, orad, dist2, f_in, f_out;
+
+  void Load(const Model& model) {
+    const std::size_t count = sample.size();
+    for (auto* v : {&px, &py, &pz, &ix, &iy, &iz, &ir, &ox, &oy, &oz, &orad, &dist2, &f_in, &f_out}) v->resize(count);
+    for (std::size_t m = 0; m < count; ++m) {
+      const std::uint32_t j = sample[m];
+      const Patch& q = model.patches[j];
+      px[m] = q.p[0], py[m] = q.p[1], pz[m] = q.p[2];
+      const auto& bi = model.inner[j];
+      ix[m] = bi[0], iy[m] = bi[1], iz[m] = bi[2], ir[m] = bi[3];
+      const auto& bo = model.outer[j];
+      ox[m] = bo[0], oy[m] = bo[1], oz[m] = bo[2], orad[m] = bo[3];
+    }
+  }
+};
+
+// A block's candidate lists, culled exactly: with s the block centre and rho its half-diagonal,
+// a candidate whose value at s exceeds the block's best by more than 2 rho cannot be the best
+// (blend: among the 4 nearest) at any node of the block.
+struct Lists {
+  std::array<std::uint8_t, kBrickCandidates> p, in, out;
+  std::size_t np = 0, nin = 0, nout = 0;
+  int certified = 0;  // +1: every node is +band, -1: -band (the bracket alone decides)
+};
+
+// The candidates of a block's lists, copied into contiguous arrays (list order kept), so that the
+// per-node loops over them vectorise.
+struct Block {
+  std::size_t np = 0, nin = 0, nout = 0;
+  std::array<float, kBrickCandidates> px, py, pz, ix, iy, iz, ir, ox, oy, oz, orad;
+  std::array<std::uint32_t, kBrickCandidates> sample;
+};
+
+void Pack(const Scratch& s, const Lists& l, Block& b) {
+  b.np = l.np, b.nin = l.nin, b.nout = l.nout;
+  for (std::size_t a = 0; a < l.np; ++a) {
+    const std::uint8_t m = l.p[a];
+    b.px[a] = s.px[m], b.py[a] = s.py[m], b.pz[a] = s.pz[m], b.sample[a] = s.sample[m];
+  }
+  for (std::size_t a = 0; a < l.nin; ++a) {
+    const std::uint8_t m = l.in[a];
+    b.ix[a] = s.ix[m], b.iy[a] = s.iy[m], b.iz[a] = s.iz[m], b.ir[a] = s.ir[m];
+  }
+  for (std::size_t a = 0; a < l.nout; ++a) {
+    const std::uint8_t m = l.out[a];
+    b.ox[a] = s.ox[m], b.oy[a] = s.oy[m], b.oz[a] = s.oz[m], b.orad[a] = s.orad[m];
+  }
+}
+
+// The per-node formula (see the header) at kLanes points (xs, ys, zs, voxels) over a block's
+// candidates, each point computed exactly as alone (same operations in the same order); the
+// loops over the candidates run across the points, which vectorises. Clamped to +-clamp_to.
+template <std::size_t kLanes>
+void EvaluatePoints(const Model& model, const Block& b, const std::array<float, kLanes>& xs,
+                    const std::array<float, kLanes>& ys, const std::array<float, kLanes>& zs, float clamp_to,
+                    std::array<float, kLanes>& out) {
+  if (b.np == 0) {
+    out.fill(clamp_to);
+    return;
+  }
+  std::array<std::array<float, kLanes>, kBrickCandidates> d2;
+  for (std::size_t m = 0; m < b.np; ++m)
+    for (std::size_t k = 0; k < kLanes; ++k) {
+      const float dx = xs[k] - b.px[m], dy = ys[k] - b.py[m], dz = zs[k] - b.pz[m];
+      d2[m][k] = dx * dx + dy * dy + dz * dz;
+    }
+  const auto lowest = [&](std::size_t n, const float* bx, const float* by, const float* bz, const float* br,
+                          std::array<float, kLanes>& v) {
+    v.fill(std::numeric_limits<float>::infinity());
+    for (std::size_t m = 0; m < n; ++m)
+      for (std::size_t k = 0; k < kLanes; ++k) {
+        const float dx = xs[k] - bx[m], dy = ys[k] - by[m], dz = zs[k] - bz[m];
+        v[k] = std::min(v[k], std::sqrt(dx * dx + dy * dy + dz * dz) - br[m]);
+      }
+  };
+  std::array<float, kLanes> f_in, f_out;
+  lowest(b.nin, b.ix.data(), b.iy.data(), b.iz.data(), b.ir.data(), f_in);
+  lowest(b.nout, b.ox.data(), b.oy.data(), b.oz.data(), b.orad.data(), f_out);
+  for (std::size_t k = 0; k < kLanes; ++k) {
+    const float x = xs[k], y = ys[k], z = zs[k];
+    // The kBlendPatches nearest: a strict comparison keeps the earlier candidate on ties, so the
+    // choice does not depend on how the lists were culled.
+    std::array<std::size_t, kBlendPatches> near{};
+    std::array<float, kBlendPatches> near_d2{};
+    std::size_t found = 0;
+    for (std::size_t m = 0; m < b.np; ++m) {
+      const float dm = d2[m][k];
+      if (found < kBlendPatches || dm < near_d2[found - 1]) {
+        std::size_t at = found < kBlendPatches ? found++ : found - 1;
+        while (at > 0 && dm < near_d2[at - 1]) {
+          near[at] = near[at - 1];
+          near_d2[at] = near_d2[at - 1];
+          --at;
+        }
+        near[at] = m;
+        near_d2[at] = dm;
+      }
+    }
+    // 1. Blended osculating patches of the nearest samples that agree with the nearest one. The
+    // 4 patch distances are computed side by side (one vector square root and division); a lane
+    // that is absent or disagrees gets weight 0, which adds exactly 0 to the sums.
+    std::array<const Patch*, kBlendPatches> q{};
+    for (std::size_t a = 0; a < kBlendPatches; ++a) q[a] = &model.patches[b.sample[near[a < found ? a : 0]]];
+    std::array<float, kBlendPatches> num{}, root{}, weight{};
+    for (std::size_t a = 0; a < kBlendPatches; ++a) {
+      const Patch& p = *q[a];
+      const float dx = x - p.p[0], dy = y - p.p[1], dz = z - p.p[2];
+      const float u = dx * p.t1[0] + dy * p.t1[1] + dz * p.t1[2];
+      const float v = dx * p.t2[0] + dy * p.t2[1] + dz * p.t2[2];
+      const float w = dx * p.n[0] + dy * p.n[1] + dz * p.n[2];
+      const float h = p.A * u * u + p.B * u * v + p.C * v * v + p.b * u + p.c * v;
+      const float gu = 2 * p.A * u + p.B * v + p.b;
+      const float gv = p.B * u + 2 * p.C * v + p.c;
+      num[a] = w - h;
+      root[a] = 1 + gu * gu + gv * gv;
+      const bool agree = a == 0 || p.n[0] * q[0]->n[0] + p.n[1] * q[0]->n[1] + p.n[2] * q[0]->n[2] >= kQuadricAgreeCos;
+      weight[a] = (a < found && agree) ? 1.0f : 0.0f;
+    }
+    std::array<float, kBlendPatches> dist{}, w2{};
+    for (std::size_t a = 0; a < kBlendPatches; ++a) {
+      dist[a] = num[a] / std::sqrt(root[a]);
+      const float w = weight[a] / (near_d2[a] + 1e-3f);
+      w2[a] = w * w;
+    }
+    float sum_w = 0, sum_f = 0;
+    for (std::size_t a = 0; a < kBlendPatches; ++a) {
+      sum_w += w2[a];
+      sum_f += w2[a] * dist[a];
+    }
+    const float quadric = sum_f / sum_w;
+    // 2. Bracket from the guarded packed balls.
+    const float lo = std::min(-f_out[k], f_in[k]) - kBracketSlackVoxels;
+    const float hi = std::max(-f_out[k], f_in[k]) + kBracketSlackVoxels;
+    out[k] = std::clamp(std::clamp(quadric, lo, hi), -clamp_to, clamp_to);
+  }
+}
+
+// One point.
+float EvaluateBlock(const Model& model, const Block& b, float x, float y, float z, float clamp_to) {
+  std::array<float, 1> out{};
+  EvaluatePoints<1>(model, b, {x}, {y}, {z}, clamp_to, out);
+  return out[0];
+}
+
+// kAll: the parent lists are all candidates in order (the loops then run over contiguous arrays
+// and vectorise).
+template <bool kAll>
+void Cull(const Scratch& s, const Lists& parent, float cx, float cy, float cz, float rho, float band, Lists& child) {
+  const float keep = 2.0f * rho + kCullSlackVoxels;
+  // Balls first (f = |s - c| - r, d = |s - c|): a block the bracket alone decides needs no lists.
+  struct BallsAtS {
+    std::array<float, kBrickCandidates> f, d;
+  };
+  BallsAtS bi, bo;
+  const auto balls = [&](const std::array<std::uint8_t, kBrickCandidates>& list, std::size_t n, const float* x,
+                         const float* y, const float* z, const float* radius, BallsAtS& out) {
+    float lowest = std::numeric_limits<float>::infinity();
+    for (std::size_t a = 0; a < n; ++a) {
+      const std::size_t m = kAll ? a : list[a];
+      const float dx = cx - x[m], dy = cy - y[m], dz = cz - z[m];
+      out.d[a] = std::sqrt(dx * dx + dy * dy + dz * dz);
+      out.f[a] = out.d[a] - radius[m];
+    }
+    for (std::size_t a = 0; a < n; ++a) lowest = std::min(lowest, out.f[a]);
+    return lowest;
+  };
+  const float in_at_s = balls(parent.in, parent.nin, s.ix.data(), s.iy.data(), s.iz.data(), s.ir.data(), bi);
+  const float out_at_s = balls(parent.out, parent.nout, s.ox.data(), s.oy.data(), s.oz.data(), s.orad.data(), bo);
+  // lo = min(-f_out, f_in) - slack >= band everywhere, or hi = max(-f_out, f_in) + slack <= -band.
+  const float margin = band + kBracketSlackVoxels + kCullSlackVoxels;
+  child.certified = 0;
+  if (out_at_s + rho <= -margin && in_at_s - rho >= margin) child.certified = 1;
+  if (out_at_s - rho >= margin && in_at_s + rho <= -margin) child.certified = -1;
+  if (child.certified != 0) return;
+
+  // Balls: B = the lowest at s. Over the block, f_A - f_B = |x - c_A| - |x - c_B| - r_A + r_B
+  // changes by at most rho (|u_A - u_B| + 2 rho / d_A + 2 rho / d_B), u = (s - c)/d the unit
+  // vectors (they turn by at most 2|x - s| / d), so A is never below B in the block when it is
+  // above B at s by more; and never by more than 2 rho.
+  const auto select = [&](const std::array<std::uint8_t, kBrickCandidates>& list, std::size_t n, const float* x,
+                          const float* y, const float* z, const BallsAtS& at, float fb,
+                          std::array<std::uint8_t, kBrickCandidates>& to, std::size_t& nto) {
+    nto = 0;
+    std::size_t lowest = 0;
+    while (lowest < n && at.f[lowest] != fb) ++lowest;
+    if (lowest == n) return;
+    const std::size_t mb = kAll ? lowest : list[lowest];
+    const float db = at.d[lowest];
+    const float ubx = (cx - x[mb]) / db, uby = (cy - y[mb]) / db, ubz = (cz - z[mb]) / db;
+    const float turn_b = 2.0f * rho / std::max(db - rho, 1e-6f);
+    for (std::size_t a = 0; a < n; ++a) {
+      const float gap = at.f[a] - fb;
+      if (gap > keep) continue;
+      if (gap > kCullSlackVoxels) {
+        const std::size_t m = kAll ? a : list[a];
+        const float d = at.d[a];
+        const float ex = (cx - x[m]) / d - ubx, ey = (cy - y[m]) / d - uby, ez = (cz - z[m]) / d - ubz;
+        const float turn = std::sqrt(ex * ex + ey * ey + ez * ez) + 2.0f * rho / std::max(d - rho, 1e-6f) + turn_b;
+        if (gap > rho * turn + kCullSlackVoxels) continue;
+      }
+      to[nto++] = list[a];
+    }
+  };
+  select(parent.in, parent.nin, s.ix.data(), s.iy.data(), s.iz.data(), bi, in_at_s, child.in, child.nin);
+  select(parent.out, parent.nout, s.ox.data(), s.oy.data(), s.oz.data(), bo, out_at_s, child.out, child.nout);
+
+  // Blend candidates: keep those within `keep` of the 4th-nearest distance.
+  std::array<float, kBrickCandidates> dp;
+  for (std::size_t a = 0; a < parent.np; ++a) {
+    const std::size_t m = kAll ? a : parent.p[a];
+    const float dx = cx - s.px[m], dy = cy - s.py[m], dz = cz - s.pz[m];
+    dp[a] = std::sqrt(dx * dx + dy * dy + dz * dz);
+  }
+  std::array<float, kBlendPatches> best;
+  best.fill(std::numeric_limits<float>::infinity());
+  for (std::size_t a = 0; a < parent.np; ++a) {
+    float d = dp[a];
+    for (float& b : best) {
+      const float lo = std::min(b, d);
+      d = std::max(b, d);
+      b = lo;
+    }
+  }
+  const float p_limit = best[std::min(parent.np, std::size_t{kBlendPatches}) - 1] + keep;
+  child.np = 0;
+  for (std::size_t a = 0; a < parent.np; ++a)
+    if (dp[a] <= p_limit) child.p[child.np++] = parent.p[a];
+}
+
+// The brick-level centre test, one level down: +-band if the estimate at the block centre is
+// farther than band + rho + 1 (its own error) from the surface, so that no node of the block is
+// within the band; else 0 (evaluate the nodes).
+float FarValue(const Model& model, const Block& block, float cx, float cy, float cz, float rho, float band) {
+  const float phi = EvaluateBlock(model, block, cx, cy, cz, 4.0f * band);
+  if (std::abs(phi) < band + rho + kCentreTestMarginVoxels) return 0.0f;
+  return phi > 0.0f ? band : -band;
+}
+
+// Evaluates the nodes of one brick (s.Load done) into `values` (kBrickNodes, local order):
+// culled lists for the brick, per 4^3 block, per 2^3 block, then the per-node formula.
+void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double, 3>& corner,
+                   const std::array<int, 3>& box, float band, float* values) {
+  constexpr int kB = SparseField::kBrick;
+  Lists all;
+  all.np = all.nin = all.nout = s.sample.size();
+  for (std::size_t m = 0; m < s.sample.size(); ++m) {
+    all.p[m] = all.in[m] = all.out[m] = static_cast<std::uint8_t>(m);
+  }
+  const float rho8 = 3.5f * std::sqrt(3.0f), rho4 = 1.5f * std::sqrt(3.0f), rho2 = 0.5f * std::sqrt(3.0f);
+  // Coordinates are summed in double and rounded once.
+  const auto at = [&](std::size_t axis, double offset) { return static_cast<float>(corner[axis] + offset); };
+  Lists l8, l4, l2;
+  Block block;
+  const auto fill = [&](int a0, int b0, int c0, int size, float v) {
+    for (int a = a0; a < a0 + size; ++a)
+      for (int b = b0; b < b0 + size; ++b)
+        for (int c = c0; c < c0 + size; ++c) values[(a * kB + b) * kB + c] = v;
+  };
+  Cull<true>(s, all, at(0, 3.5), at(1, 3.5), at(2, 3.5), rho8, band, l8);
+  if (l8.certified != 0) {
+    fill(0, 0, 0, kB, static_cast<float>(l8.certified) * band);
+    return;
+  }
+  for (int a4 = 0; a4 < kB; a4 += 4)
+    for (int b4 = 0; b4 < kB; b4 += 4)
+      for (int c4 = 0; c4 < kB; c4 += 4) {
+        if (a4 >= box[0] || b4 >= box[1] || c4 >= box[2]) {
+          fill(a4, b4, c4, 4, band);  // no grid nodes here (last brick of an axis)
+          continue;
+        }
+        Cull<false>(s, l8, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band, l4);
+        if (l4.certified != 0) {
+          fill(a4, b4, c4, 4, static_cast<float>(l4.certified) * band);
+          continue;
+        }
+        Pack(s, l4, block);
+        if (const float far = FarValue(model, block, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band);
+            far != 0.0f) {
+          fill(a4, b4, c4, 4, far);
+          continue;
+        }
+        for (int a2 = a4; a2 < a4 + 4; a2 += 2)
+          for (int b2 = b4; b2 < b4 + 4; b2 += 2)
+            for (int c2 = c4; c2 < c4 + 4; c2 += 2) {
+              Cull<false>(s, l4, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band, l2);
+              if (l2.certified != 0) {
+                fill(a2, b2, c2, 2, static_cast<float>(l2.certified) * band);
+                continue;
+              }
+              Pack(s, l2, block);
+              if (const float far =
+                      FarValue(model, block, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band);
+                  far != 0.0f) {
+                fill(a2, b2, c2, 2, far);
+                continue;
+              }
+              std::array<float, 8> xs, ys, zs, out;
+              for (std::size_t k = 0; k < 8; ++k) {
+                xs[k] = at(0, a2 + static_cast<int>(k >> 2));
+                ys[k] = at(1, b2 + static_cast<int>((k >> 1) & 1));
+                zs[k] = at(2, c2 + static_cast<int>(k & 1));
+              }
+              EvaluatePoints<8>(model, block, xs, ys, zs, band, out);
+              for (std::size_t k = 0; k < 8; ++k)
+                values[((a2 + static_cast<int>(k >> 2)) * kB + b2 + static_cast<int>((k >> 1) & 1)) * kB + c2 +
+                       static_cast<int>(k & 1)] = out[k];
+            }
+      }
+}
+
+}  // namespace
+
+std::vector<double> SampleSpacing(const std::vector<V3>& positions, int kth) {
+  std::vector<double> spacing(positions.size(), 0.0);
+  if (positions.size() < 2 || kth < 1) return spacing;
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const std::size_t k = std::min<std::size_t>(static_cast<std::size_t>(kth) + 1, positions.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
+    std::vector<std::size_t> idx(k);
+    std::vector<double> d2(k);
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), k, idx.data(), d2.data());
+      spacing[i] =
+          got > 0 ? std::sqrt(*std::max_element(d2.begin(), d2.begin() + static_cast<std::ptrdiff_t>(got))) : 0.0;
+    }
+  });
+  return spacing;
+}
+
+std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, const std::vector<V3>& ball_normals,
+                         const std::vector<double>& spacing, double disc_spacings, double tolerance) {
+  const std::size_t n = positions.size();
+  if (packing.radii.size() != n || ball_normals.size() != n || spacing.size() != n || n < 2) return 0;
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const double max_disc = disc_spacings * *std::max_element(spacing.begin(), spacing.end());
+  std::vector<double> radii(n);
+  tbb::enumerable_thread_specific<std::vector<std::size_t>> crossing_tls;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const V3& p = positions[i];
+      const V3& ni = ball_normals[i];
+      double r = packing.radii[i];
+      // A disc that the ball crosses has its centre within r + disc radius of the ball centre;
+      // the ball itself holds no sample, so this search returns only the shell around it.
+      const V3 centre = p - r * ni;
+      const double search = r + max_disc;
+      // Only samples whose plane this ball pokes through can shrink it (a smaller ball, nested
+      // in this one at P_i, pokes through less); they are visited by index, so the shrink order
+      // does not depend on the tree.
+      auto& crossing = crossing_tls.local();
+      crossing.clear();
+      CrossingResult result(search * search, i, centre, r, tolerance, positions, ball_normals, crossing);
+      tree.findNeighbors(result, centre.data(), nanoflann::SearchParams());
+      std::sort(crossing.begin(), crossing.end());
+      for (const std::size_t j : crossing) {
+        const V3& nj = ball_normals[j];
+        const V3& pj = positions[j];
+        const double height = nj.dot(p - pj);  // P_i above plane j: concave there, no barrier
+        if (height > 0.0) continue;
+        const double cos_ij = nj.dot(ni);
+        if (cos_ij > 1.0 - 1e-9) continue;
+        const V3 c = p - r * ni;
+        if (nj.dot(c - pj) + r <= tolerance) continue;  // pokes through plane j by <= tolerance
+        const V3 tip = c + r * nj;                      // deepest point beyond plane j
+        const V3 lateral = (tip - pj) - nj.dot(tip - pj) * nj;
+        if (lateral.norm() > disc_spacings * spacing[j]) continue;  // crosses the plane off the disc
+        // Largest r with nj.(P_i - r ni - P_j) + r <= tolerance (linear in r).
+        r = std::min(r, std::max((tolerance - height) / (1.0 - cos_ij), 0.0));
+      }
+      radii[i] = r;
+    }
+  });
+  std::size_t shrunk = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (radii[i] < packing.radii[i]) ++shrunk;
+    packing.radii[i] = radii[i];
+    packing.centres[i] = positions[i] - radii[i] * ball_normals[i];
+  }
+  return shrunk;
+}
+
+SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                         double r_max, const HermiteOptions& options, HermiteStats* stats) {
+  SparseField field(grid);
+  const std::size_t n = positions.size();
+  if (n < 2 || normals.size() != n || !(grid.voxel_m > 0.0)) return field;
+  const double h = grid.voxel_m;
+  const auto band = static_cast<float>(grid.band_voxels);
+  HermiteStats local;
+  HermiteStats& st = stats != nullptr ? *stats : local;
+
+  auto start = std::chrono::steady_clock::now();
+  const std::vector<double> spacing = SampleSpacing(positions);
+  std::vector<V3> flipped(n);
+  for (std::size_t i = 0; i < n; ++i) flipped[i] = -normals[i];
+  tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
+                       [&] { st.outer = PackSpheres(positions, flipped, r_max); });
+  if (options.leak_guard) {
+    tbb::parallel_invoke(
+        [&] {
+          st.inner_balls_shrunk =
+              GuardPacking(st.inner, positions, normals, spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
+        },
+        [&] {
+          st.outer_balls_shrunk =
+              GuardPacking(st.outer, positions, flipped, spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
+        });
+  }
+  st.seconds_packing = SecondsSince(start);
+
+  start = std::chrono::steady_clock::now();
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  Model model;
+  model.patches.resize(n);
+  model.inner.resize(n);
+  model.outer.resize(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      model.patches[i] = FitPatch(tree, positions, normals, i, h);
+      const auto ball = [&](const Packing& pk) {
+        const V3 c = pk.centres[i] / h;
+        return std::array<float, 4>{static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
+                                    static_cast<float>(pk.radii[i] / h)};
+      };
+      model.inner[i] = ball(st.inner);
+      model.outer[i] = ball(st.outer);
+    }
+  });
+
+  st.seconds_patches = SecondsSince(start);
+  auto phase = std::chrono::steady_clock::now();
+  // Bricks within band + spacing of a sample may hold band nodes (the surface between samples
+  // stays within about one spacing of them); no other brick is ever evaluated.
+  const auto& bd = field.brick_dims();
+  const std::size_t n_bricks =
+      static_cast<std::size_t>(bd[0]) * static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
+  constexpr int kB = SparseField::kBrick;
+  std::vector<std::uint8_t> marked(n_bricks, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const V3 g = (positions[i] - grid.origin_m) / h;
+    const double reach = band + 1.0 + spacing[i] / h;
+    std::array<int, 3> lo{}, hi{};
+    for (std::size_t a = 0; a < 3; ++a) {
+      const auto ga = g[static_cast<Eigen::Index>(a)];
+      lo[a] = std::clamp(static_cast<int>(std::floor((ga - reach) / kB)), 0, bd[a] - 1);
+      hi[a] = std::clamp(static_cast<int>(std::floor((ga + reach) / kB)), 0, bd[a] - 1);
+    }
+    for (int bi = lo[0]; bi <= hi[0]; ++bi)
+      for (int bj = lo[1]; bj <= hi[1]; ++bj)
+        for (int bk = lo[2]; bk <= hi[2]; ++bk) marked[field.BrickIndex(bi, bj, bk)] = 1;
+  }
+  std::vector<std::size_t> candidates;  // marked bricks, in brick order
+  for (std::size_t b = 0; b < n_bricks; ++b)
+    if (marked[b] != 0) candidates.push_back(b);
+
+  const V3 origin_vox = grid.origin_m / h;
+  const auto brick_coords = [&](std::size_t brick) {
+    const auto plane = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
+    return std::array<int, 3>{
+        static_cast<int>(brick / plane),
+        static_cast<int>((brick / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1])),
+        static_cast<int>(brick % static_cast<std::size_t>(bd[2]))};
+  };
+  // The kBrickCandidates samples nearest each candidate brick's centre, found once (centre test)
+  // and kept for the evaluation.
+  std::vector<std::int32_t> candidate_of(n_bricks, -1);
+  for (std::size_t c = 0; c < candidates.size(); ++c) candidate_of[candidates[c]] = static_cast<std::int32_t>(c);
+  std::vector<std::uint32_t> candidate_samples(candidates.size() * kBrickCandidates);
+  std::vector<std::uint8_t> candidate_count(candidates.size(), 0);
+  tbb::enumerable_thread_specific<Scratch> scratch_tls;
+  const auto gather = [&](std::size_t c, Scratch& s) {
+    const std::array<int, 3> bc = brick_coords(candidates[c]);
+    const V3 centre = grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1)));
+    s.idx.resize(kBrickCandidates);
+    s.d2.resize(kBrickCandidates);
+    const std::size_t got = Nearest(tree, centre, kBrickCandidates, s.idx.data(), s.d2.data(), s.order);
+    s.sample.resize(got);
+    for (std::size_t m = 0; m < got; ++m) {
+      s.sample[m] = static_cast<std::uint32_t>(s.idx[m]);
+      candidate_samples[c * kBrickCandidates + m] = s.sample[m];
+    }
+    candidate_count[c] = static_cast<std::uint8_t>(got);
+    s.Load(model);
+  };
+  const auto load_candidates = [&](std::size_t brick, Scratch& s) {
+    const auto c = static_cast<std::size_t>(candidate_of[brick]);
+    const auto first = candidate_samples.begin() + static_cast<std::ptrdiff_t>(c * kBrickCandidates);
+    s.sample.assign(first, first + candidate_count[c]);
+    s.Load(model);
+  };
+  const auto evaluate = [&](std::size_t brick, Scratch& s, float* values) {
+    const std::array<int, 3> c = brick_coords(brick);
+    const std::array<double, 3> corner = {origin_vox.x() + c[0] * kB, origin_vox.y() + c[1] * kB,
+                                          origin_vox.z() + c[2] * kB};
+    const std::array<int, 3> box = {std::min(kB, grid.dims[0] - c[0] * kB), std::min(kB, grid.dims[1] - c[1] * kB),
+                                    std::min(kB, grid.dims[2] - c[2] * kB)};
+    EvaluateBrick(model, s, corner, box, band, values);
+  };
+
+  // Active bricks: a brick whose centre is farther than band + half-diagonal (+1 for the
+  // estimate's own error) from the surface holds no band node.
+  const float half_diag = 0.5f * static_cast<float>(kB - 1) * std::sqrt(3.0f);
+  std::vector<std::uint8_t> active(n_bricks, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 8), [&](const auto& r) {
+    Scratch& s = scratch_tls.local();
+    for (std::size_t c = r.begin(); c != r.end(); ++c) {
+      gather(c, s);
+      const std::array<int, 3> bc = brick_coords(candidates[c]);
+      const V3 centre = origin_vox + V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1));
+      Lists all;
+      all.np = all.nin = all.nout = s.sample.size();
+      for (std::size_t m = 0; m < s.sample.size(); ++m)
+        all.p[m] = all.in[m] = all.out[m] = static_cast<std::uint8_t>(m);
+      Block block;
+      Pack(s, all, block);
+      const float phi = EvaluateBlock(model, block, static_cast<float>(centre.x()), static_cast<float>(centre.y()),
+                                      static_cast<float>(centre.z()), 4.0f * band);
+      if (std::abs(phi) < band + half_diag + kCentreTestMarginVoxels) active[candidates[c]] = 1;
+    }
+  });
+
+  // Evaluate the active bricks; then, until none is added, every marked brick that an evaluated
+  // node below band - 1 faces (a band node the centre test missed: its neighbour across the face
+  // is within band of the surface).
+  st.seconds_active = SecondsSince(phase);
+  phase = std::chrono::steady_clock::now();
+  std::vector<std::size_t> todo;
+  for (std::size_t b = 0; b < n_bricks; ++b)
+    if (active[b] != 0) todo.push_back(b);
+  std::vector<std::uint8_t> evaluated(n_bricks, 0);
+  while (!todo.empty()) {
+    for (const std::size_t b : todo) evaluated[b] = 1;
+    field.AllocateAll(evaluated);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 2), [&](const auto& r) {
+      Scratch& s = scratch_tls.local();
+      for (std::size_t t = r.begin(); t != r.end(); ++t) {
+        load_candidates(todo[t], s);
+        evaluate(todo[t], s, field.BrickValues(todo[t]));
+      }
+    });
+    st.bricks_evaluated += todo.size();
+    std::vector<std::uint8_t> want(n_bricks, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& r) {
+      for (std::size_t t = r.begin(); t != r.end(); ++t) {
+        const std::array<int, 3> c = brick_coords(todo[t]);
+        const float* v = field.BrickValues(todo[t]);
+        for (int f = 0; f < 6; ++f) {
+          std::array<int, 3> nb = c;
+          const auto axis = static_cast<std::size_t>(f / 2);
+          nb[axis] += (f % 2) == 1 ? 1 : -1;
+          if (nb[axis] < 0 || nb[axis] >= bd[axis]) continue;
+          const std::size_t nbi = field.BrickIndex(nb[0], nb[1], nb[2]);
+          if (evaluated[nbi] != 0 || marked[nbi] == 0) continue;
+          const int at = (f % 2) == 1 ? kB - 1 : 0;
+          bool low = false;
+          for (int u = 0; u < kB && !low; ++u)
+            for (int w = 0; w < kB && !low; ++w) {
+              std::array<int, 3> l{};
+              l[axis] = at;
+              l[axis == 0 ? 1 : 0] = u;
+              l[axis == 2 ? 1 : 2] = w;
+              low = std::abs(v[(l[0] * kB + l[1]) * kB + l[2]]) < band - SparseField::kLipschitzStep;
+            }
+          // Distinct bricks write distinct flags only when they share no neighbour; a relaxed
+          // atomic store keeps concurrent writes of the same 1 well-defined.
+          if (low) std::atomic_ref<std::uint8_t>(want[nbi]).store(1, std::memory_order_relaxed);
+        }
+      }
+    });
+    todo.clear();
+    for (std::size_t b = 0; b < n_bricks; ++b)
+      if (want[b] != 0) todo.push_back(b);
+    st.bricks_added += todo.size();
+  }
+
+  // Inside/outside for the rest, then the Lipschitz projection the proxy needs (the per-node
+  // formula is not 1-Lipschitz where patches meet or the bracket clamps).
+  st.seconds_evaluate = SecondsSince(phase);
+  phase = std::chrono::steady_clock::now();
+  st.label_minority_votes = field.LabelUnallocatedBricks();
+  st.lipschitz = field.ProjectLipschitz();
+  st.seconds_project = SecondsSince(phase);
+  st.seconds_distance = SecondsSince(start);
+  return field;
+}
+
+}  // namespace palpa::field

@@ -1,0 +1,112 @@
+#include "palpa/field/orientation.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <utility>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <nanoflann.hpp>
+
+namespace palpa::field {
+namespace {
+
+using V3 = Eigen::Vector3d;
+
+constexpr std::size_t kSupportPoints = 8;
+constexpr std::size_t kNeighbours = 8;
+constexpr double kFlatSin = 0.17364817766693033;  // sin(10 degrees)
+constexpr double kOppositeCos = -0.5;
+constexpr double kFlippedFraction = 0.01;
+
+struct PointCloud {
+  const std::vector<V3>* points;
+  std::size_t kdtree_get_point_count() const { return points->size(); }
+  double kdtree_get_pt(std::size_t idx, std::size_t dim) const {
+    return (*points)[idx][static_cast<Eigen::Index>(dim)];
+  }
+  template <class BBox>
+  bool kdtree_get_bbox(BBox& /*bb*/) const {
+    return false;
+  }
+};
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
+
+}  // namespace
+
+bool OrientationReport::Inconsistent() const {
+  return inward_support_directions > 0 ||
+         static_cast<double>(flipped_flat_pairs) > kFlippedFraction * static_cast<double>(flat_pairs);
+}
+
+std::string OrientationReport::Describe() const {
+  return fmt::format(
+      "on {} of {} directions the outermost points' normals point inward, and {} of {} neighbour pairs on one "
+      "tangent plane ({} points) have opposite normals",
+      inward_support_directions, support_directions, flipped_flat_pairs, flat_pairs, points_in_flipped_pairs);
+}
+
+OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::vector<V3>& normals) {
+  OrientationReport report;
+  const std::size_t n = positions.size();
+  if (n < 2 || normals.size() != n) return report;
+
+  // Support test.
+  std::vector<std::pair<double, std::size_t>> along(n);
+  for (int i = -1; i <= 1; ++i)
+    for (int j = -1; j <= 1; ++j)
+      for (int k = -1; k <= 1; ++k) {
+        if (i == 0 && j == 0 && k == 0) continue;
+        const V3 u = V3(i, j, k).normalized();
+        for (std::size_t p = 0; p < n; ++p) along[p] = {-u.dot(positions[p]), p};  // ties: lower index first
+        const std::size_t top = std::min(kSupportPoints, n);
+        std::partial_sort(along.begin(), along.begin() + static_cast<std::ptrdiff_t>(top), along.end());
+        std::size_t inward = 0;
+        for (std::size_t t = 0; t < top; ++t) inward += normals[along[t].second].dot(u) < 0.0 ? 1u : 0u;
+        ++report.support_directions;
+        report.inward_support_directions += 2 * inward > top ? 1 : 0;
+      }
+
+  // Flat-pair test, each unordered pair once (from its lower index), so the counts do not depend
+  // on the tree or the thread count.
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const std::size_t k = std::min(kNeighbours + 1, n);
+  std::vector<std::uint8_t> flipped_point(n, 0);
+  std::vector<std::pair<std::size_t, std::size_t>> counts(n, {0u, 0u});  // per point: flat, flipped
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+    std::array<std::size_t, kNeighbours + 1> idx{};
+    std::array<double, kNeighbours + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), k, idx.data(), d2.data());
+      for (std::size_t m = 0; m < got; ++m) {
+        const std::size_t j = idx[m];
+        if (j <= i) continue;
+        const V3 chord = positions[j] - positions[i];
+        const double length = chord.norm();
+        if (!(length > 0.0)) continue;
+        const double a = normals[i].dot(chord) / length, b = normals[j].dot(chord) / length;
+        if (std::abs(a) >= kFlatSin || std::abs(b) >= kFlatSin) continue;
+        ++counts[i].first;
+        if (normals[i].dot(normals[j]) < kOppositeCos) {
+          ++counts[i].second;
+          std::atomic_ref<std::uint8_t>(flipped_point[i]).store(1, std::memory_order_relaxed);
+          std::atomic_ref<std::uint8_t>(flipped_point[j]).store(1, std::memory_order_relaxed);
+        }
+      }
+    }
+  });
+  for (const auto& [flat, flipped] : counts) {
+    report.flat_pairs += flat;
+    report.flipped_flat_pairs += flipped;
+  }
+  report.points_in_flipped_pairs =
+      static_cast<std::size_t>(std::count(flipped_point.begin(), flipped_point.end(), std::uint8_t{1}));
+  return report;
+}
+
+}  // namespace palpa::field

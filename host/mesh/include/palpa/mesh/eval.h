@@ -1,0 +1,101 @@
+// Scoring a signed distance field against the true signed distance of a known surface
+// (`palpa eval`, issue 5). All errors are in voxels; the field is read from a verified blob.
+// Non-RT; multi-threaded with TBB where it pays (the exact mesh distances).
+//
+// Typical use from a test:
+//   auto mesh = palpa::mesh::ReadClosedMesh("data/knot1.off");          // model units
+//   auto truth = palpa::mesh::TrueDistances(view, palpa::mesh::Truth::Mesh(*mesh));
+//   auto score = palpa::mesh::Evaluate(view, *truth);                  // score->mean_abs_error
+// Build the truth once and reuse it for every field on the same grid (same dims/origin/voxel).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <expected>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "palpa/blob/blob.h"
+#include "palpa/mesh/triangle_mesh.h"
+
+namespace palpa::mesh {
+
+/// The surface a field is scored against, in MODEL units (the units of the points the field was
+/// built from). It goes through the blob's fit transform, device = fit_scale·model +
+/// fit_offset_m, exactly as the points did.
+struct Truth {
+  enum class Kind { kSphere, kMesh };
+  Kind kind = Kind::kSphere;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< sphere centre, model units
+  double radius = 0;                                 ///< sphere radius, model units, > 0
+  TriangleMesh mesh;                                 ///< closed, consistently oriented
+
+  /// Sphere |x − centre| − radius (model units); e.g. sphere926.pwn is radius 10 at the origin.
+  static Truth Sphere(double radius, const Eigen::Vector3d& centre = Eigen::Vector3d::Zero());
+  /// A closed mesh, e.g. from ReadClosedMesh (orientation is fixed up if inward).
+  static Truth Mesh(TriangleMesh mesh);
+};
+
+/// True signed distance at every node of a field's grid.
+struct TrueDistanceGrid {
+  std::array<int, 3> dims{};                           ///< nodes nx, ny, nz (the blob's)
+  Eigen::Vector3d origin_m = Eigen::Vector3d::Zero();  ///< device position of node (0,0,0), m
+  double voxel_m = 0;                                  ///< node spacing, m
+  double exact_within_voxels = 0;                      ///< see `voxels`
+  /// Signed distance in voxels, negative inside, C order: node (i,j,k) at index (i·ny + j)·nz + k.
+  /// Exact (to float rounding, ~1e-7 voxel) where |value| ≤ exact_within_voxels; farther nodes
+  /// hold their exact value or ±infinity, and their SIGN is always exact.
+  std::vector<float> voxels;
+};
+
+/// Computes the truth on `field`'s grid, through its fit transform.
+/// Sphere: analytic everywhere. Mesh: CGAL closest point (ExactMeshDistance) at every node inside
+/// some face's bounding box grown by exact_within_voxels. Signs: Side_of_triangle_mesh at each node
+/// within ½ voxel of the surface; every other node takes the sign of its 6-connected component of
+/// such far nodes, one Side query per component (a grid edge between two nodes more than ½ voxel
+/// from the surface cannot cross it). Multi-threaded (TBB); the result does not depend on the
+/// thread count.
+/// Errors: exact_within_voxels < 1; a sphere radius ≤ 0; a mesh that is not closed and
+/// consistently oriented (CheckClosedOriented, named "truth mesh").
+std::expected<TrueDistanceGrid, Error> TrueDistances(const blob::FieldView& field, const Truth& truth,
+                                                     double exact_within_voxels = 3);
+
+struct EvalOptions {
+  double band_voxels = 3;          ///< score nodes with |true| ≤ this (issue 5: 3 voxels)
+  double gross_beyond_voxels = 1;  ///< a wrong sign is "gross" when |true| > this
+};
+
+/// The score, in voxels (1 voxel = field.voxel_m metres). Error e = φ − true at a node.
+/// A node has the wrong sign when φ ≤ 0 and true > 0, or φ > 0 and true < 0 (true = 0: never).
+struct EvalResult {
+  std::size_t nodes = 0;                    ///< all nodes of the grid
+  std::size_t band_nodes = 0;               ///< nodes with |true| ≤ band_voxels
+  double mean_abs_error = 0;                ///< mean |e| over the band, voxels
+  double p99_abs_error = 0;                 ///< 99th percentile of |e| over the band (nearest rank), voxels
+  double max_abs_error = 0;                 ///< max |e| over the band, voxels
+  double mean_signed_error = 0;             ///< mean e over the band, voxels (> 0: field too far out)
+  Eigen::Vector3d max_error_at_m{0, 0, 0};  ///< device position of the node with max |e|, m
+  std::size_t wrong_sign_in_band = 0;       ///< band nodes with the wrong sign
+  double wrong_sign_in_band_percent = 0;    ///< 100·wrong_sign_in_band / band_nodes
+  std::size_t gross_wrong_sign = 0;         ///< nodes with |true| > gross_beyond_voxels and the wrong sign
+  double gross_wrong_sign_percent = 0;      ///< 100·gross_wrong_sign / nodes (ALL nodes)
+};
+
+/// Scores `field` against a truth computed on the same grid (dims, origin and voxel must match
+/// exactly). Deterministic and independent of the thread count.
+/// Errors: grid mismatch; band_voxels > truth.exact_within_voxels; band_voxels > the field's own
+/// narrow band (φ is clamped there, so errors would be the clamp's); no node in the band.
+std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
+                                          const EvalOptions& options = {});
+
+/// TrueDistances, then Evaluate.
+std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Truth& truth,
+                                          const EvalOptions& options = {});
+
+/// One JSON object with every EvalResult field (keys as the member names, units in the name:
+/// *_error in voxels, max_error_at_m in metres, *_percent in %).
+std::string ToJson(const EvalResult& result);
+
+}  // namespace palpa::mesh

@@ -1,0 +1,270 @@
+#include "palpa/mesh/eval.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include <fmt/core.h>
+
+#include "palpa/mesh/mesh_distance.h"
+
+namespace palpa::mesh {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+std::size_t NodeCount(const std::array<int, 3>& d) {
+  return static_cast<std::size_t>(d[0]) * static_cast<std::size_t>(d[1]) * static_cast<std::size_t>(d[2]);
+}
+
+// Model point → node index coordinates of the field's grid (where distances are in voxels).
+Eigen::Vector3d ToIndex(const blob::FieldView& f, const Eigen::Vector3d& model) {
+  const Eigen::Vector3d device =
+      f.fit_scale * model + Eigen::Vector3d(f.fit_offset_m[0], f.fit_offset_m[1], f.fit_offset_m[2]);
+  return (device - Eigen::Vector3d(f.origin_m[0], f.origin_m[1], f.origin_m[2])) / f.voxel_m;
+}
+
+void SphereDistances(const blob::FieldView& f, const Truth& truth, TrueDistanceGrid& out) {
+  const Eigen::Vector3d c = ToIndex(f, truth.centre);
+  const double r = f.fit_scale * truth.radius / f.voxel_m;
+  const auto [nx, ny, nz] = out.dims;
+  tbb::parallel_for(0, nx, [&, ny = ny, nz = nz](int i) {
+    std::size_t n = static_cast<std::size_t>(i) * static_cast<std::size_t>(ny) * static_cast<std::size_t>(nz);
+    for (int j = 0; j < ny; ++j)
+      for (int k = 0; k < nz; ++k) out.voxels[n++] = static_cast<float>((Eigen::Vector3d(i, j, k) - c).norm() - r);
+  });
+}
+
+std::expected<void, Error> MeshDistances(const blob::FieldView& f, const Truth& truth, TrueDistanceGrid& out) {
+  if (auto ok = CheckClosedOriented(truth.mesh, "truth mesh"); !ok) return ok;
+  TriangleMesh m;  // in node index coordinates, outward
+  m.faces = truth.mesh.faces;
+  m.vertices.reserve(truth.mesh.vertices.size());
+  for (const auto& v : truth.mesh.vertices) m.vertices.push_back(ToIndex(f, v));
+  OrientOutward(m);
+  const ExactMeshDistance exact(m);
+  const auto [nx, ny, nz] = out.dims;
+  const double reach = out.exact_within_voxels;
+
+  // Candidates: nodes inside some face's bounding box grown by `reach`; every node within
+  // `reach` of the surface is one.
+  std::vector<std::uint8_t> near(out.voxels.size(), 0);
+  const std::array<int, 3> dims = out.dims;
+  for (const auto& t : m.faces) {
+    const Eigen::Vector3d& a = m.vertices[static_cast<std::size_t>(t[0])];
+    const Eigen::Vector3d& b = m.vertices[static_cast<std::size_t>(t[1])];
+    const Eigen::Vector3d& c = m.vertices[static_cast<std::size_t>(t[2])];
+    const Eigen::Vector3d lo = a.cwiseMin(b).cwiseMin(c).array() - reach;
+    const Eigen::Vector3d hi = a.cwiseMax(b).cwiseMax(c).array() + reach;
+    std::array<int, 3> l{};
+    std::array<int, 3> h{};
+    bool empty = false;
+    for (int ax = 0; ax < 3; ++ax) {
+      const auto a3 = static_cast<std::size_t>(ax);
+      // Clamped before the cast: a mesh far outside the grid must not overflow int.
+      l[a3] = static_cast<int>(std::clamp(std::ceil(lo[ax]), 0.0, static_cast<double>(dims[a3])));
+      h[a3] = static_cast<int>(std::clamp(std::floor(hi[ax]), -1.0, static_cast<double>(dims[a3] - 1)));
+      empty = empty || l[a3] > h[a3];
+    }
+    if (empty) continue;
+    for (int i = l[0]; i <= h[0]; ++i)
+      for (int j = l[1]; j <= h[1]; ++j) {
+        const std::size_t row =
+            (static_cast<std::size_t>(i) * static_cast<std::size_t>(ny) + static_cast<std::size_t>(j)) *
+            static_cast<std::size_t>(nz);
+        std::fill(near.begin() + static_cast<std::ptrdiff_t>(row) + l[2],
+                  near.begin() + static_cast<std::ptrdiff_t>(row) + h[2] + 1, std::uint8_t{1});
+      }
+  }
+  std::vector<std::size_t> candidates;
+  for (std::size_t n = 0; n < near.size(); ++n)
+    if (near[n]) candidates.push_back(n);
+  near = {};
+
+  // Unsigned distances: exact at candidates within `reach`, +∞ elsewhere.
+  std::fill(out.voxels.begin(), out.voxels.end(), kInf);
+  const auto snx = static_cast<std::size_t>(nx);
+  const auto sny = static_cast<std::size_t>(ny);
+  const auto snz = static_cast<std::size_t>(nz);
+  auto node = [&](std::size_t n) {
+    return Eigen::Vector3d(static_cast<double>(n / (sny * snz)), static_cast<double>((n / snz) % sny),
+                           static_cast<double>(n % snz));
+  };
+  // Candidates are in grid order, so the previous closest point is a tight hint for the next.
+  // simple_partitioner: chunk bounds, hence hint chains, hence results do not depend on threads.
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, candidates.size(), 256),
+      [&](const auto& r) {
+        Eigen::Vector3d hint = exact.AnySurfacePoint();
+        for (std::size_t c = r.begin(); c != r.end(); ++c) {
+          const double d = exact.UnsignedDistance(node(candidates[c]), hint);
+          if (d <= reach) out.voxels[candidates[c]] = static_cast<float>(d);
+        }
+      },
+      tbb::simple_partitioner());
+
+  // Signs. A grid edge is 1 voxel long, so when both its nodes are more than ½ voxel from the
+  // surface it cannot cross it: such nodes take one sign per 6-connected component (one
+  // Side_of_triangle_mesh query each). Nodes within ½ voxel are queried one by one.
+  constexpr float kHalf = 0.5f + 1e-4f;  // margin over the float rounding of d
+  std::vector<std::int8_t> side(out.voxels.size(), 0);
+  std::vector<std::size_t> close;
+  for (const std::size_t n : candidates)
+    if (out.voxels[n] <= kHalf) close.push_back(n);
+  candidates = {};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, close.size(), 64), [&](const auto& r) {
+    for (std::size_t c = r.begin(); c != r.end(); ++c)
+      side[close[c]] = static_cast<std::int8_t>(exact.Side(node(close[c])));
+  });
+  for (const std::size_t n : close)
+    if (side[n] == 0) side[n] = 2;  // on the surface: distance 0, any sign; 2 marks "done"
+  std::vector<std::size_t> queue;
+  for (std::size_t seed = 0; seed < out.voxels.size(); ++seed) {
+    if (side[seed] != 0) continue;
+    const auto value = static_cast<std::int8_t>(exact.Side(node(seed)) < 0 ? -1 : 1);
+    side[seed] = value;
+    queue.assign(1, seed);
+    while (!queue.empty()) {
+      const std::size_t n = queue.back();
+      queue.pop_back();
+      const std::size_t i = n / (sny * snz);
+      const std::size_t j = (n / snz) % sny;
+      const std::size_t k = n % snz;
+      auto visit = [&](bool inside, std::size_t next) {
+        if (inside && side[next] == 0) {  // every unset node is more than ½ voxel away
+          side[next] = value;
+          queue.push_back(next);
+        }
+      };
+      visit(i > 0, n - sny * snz);
+      visit(i + 1 < snx, n + sny * snz);
+      visit(j > 0, n - snz);
+      visit(j + 1 < sny, n + snz);
+      visit(k > 0, n - 1);
+      visit(k + 1 < snz, n + 1);
+    }
+  }
+  for (std::size_t n = 0; n < out.voxels.size(); ++n)
+    if (side[n] == -1)
+      out.voxels[n] = -out.voxels[n];
+    else if (side[n] == 2)
+      out.voxels[n] = 0;
+  return {};
+}
+
+}  // namespace
+
+Truth Truth::Sphere(double radius, const Eigen::Vector3d& centre) {
+  Truth t;
+  t.kind = Kind::kSphere;
+  t.radius = radius;
+  t.centre = centre;
+  return t;
+}
+
+Truth Truth::Mesh(TriangleMesh mesh) {
+  Truth t;
+  t.kind = Kind::kMesh;
+  t.mesh = std::move(mesh);
+  return t;
+}
+
+std::expected<TrueDistanceGrid, Error> TrueDistances(const blob::FieldView& field, const Truth& truth,
+                                                     double exact_within_voxels) {
+  if (!(exact_within_voxels >= 1))
+    return std::unexpected(Error{fmt::format("exact_within_voxels must be at least 1, got {}", exact_within_voxels)});
+  TrueDistanceGrid out;
+  out.dims = field.dims;
+  out.origin_m = Eigen::Vector3d(field.origin_m[0], field.origin_m[1], field.origin_m[2]);
+  out.voxel_m = field.voxel_m;
+  out.voxels.resize(NodeCount(field.dims));
+  if (truth.kind == Truth::Kind::kSphere) {
+    if (!(truth.radius > 0) || !std::isfinite(truth.radius))
+      return std::unexpected(Error{fmt::format("sphere radius must be positive, got {}", truth.radius)});
+    out.exact_within_voxels = std::numeric_limits<double>::infinity();
+    SphereDistances(field, truth, out);
+    return out;
+  }
+  out.exact_within_voxels = exact_within_voxels;
+  if (auto ok = MeshDistances(field, truth, out); !ok) return std::unexpected(ok.error());
+  return out;
+}
+
+std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
+                                          const EvalOptions& options) {
+  if (field.dims != truth.dims || field.voxel_m != truth.voxel_m || field.origin_m[0] != truth.origin_m.x() ||
+      field.origin_m[1] != truth.origin_m.y() || field.origin_m[2] != truth.origin_m.z())
+    return std::unexpected(Error{"the truth was computed on another grid (dims, origin or voxel differ)"});
+  if (!(options.band_voxels > 0) || options.band_voxels > truth.exact_within_voxels)
+    return std::unexpected(Error{fmt::format("band {} voxels is outside (0, {}], where the truth is exact",
+                                             options.band_voxels, truth.exact_within_voxels)});
+  if (options.band_voxels > field.band_voxels)
+    return std::unexpected(Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels)",
+                                             options.band_voxels, field.band_voxels)});
+  EvalResult r;
+  r.nodes = truth.voxels.size();
+  std::vector<float> abs_errors;
+  double sum_abs = 0;
+  double sum_signed = 0;
+  std::size_t max_at = 0;
+  for (std::size_t n = 0; n < r.nodes; ++n) {
+    const double phi = static_cast<double>(field.phi[n]) / 65536.0;
+    const double t = truth.voxels[n];
+    const bool wrong = (phi <= 0 && t > 0) || (phi > 0 && t < 0);
+    if (std::abs(t) <= options.band_voxels) {
+      const double e = phi - t;
+      abs_errors.push_back(static_cast<float>(std::abs(e)));
+      sum_abs += std::abs(e);
+      sum_signed += e;
+      if (std::abs(e) > r.max_abs_error) {
+        r.max_abs_error = std::abs(e);
+        max_at = n;
+      }
+      if (wrong) ++r.wrong_sign_in_band;
+    }
+    if (wrong && std::abs(t) > options.gross_beyond_voxels) ++r.gross_wrong_sign;
+  }
+  r.band_nodes = abs_errors.size();
+  if (r.band_nodes == 0) return std::unexpected(Error{"no grid node lies within the band of the true surface"});
+  const double band = static_cast<double>(r.band_nodes);
+  r.mean_abs_error = sum_abs / band;
+  r.mean_signed_error = sum_signed / band;
+  // Nearest rank: the smallest value with at least 99 % of the band at or below it.
+  const auto rank = static_cast<std::size_t>(std::ceil(0.99 * band)) - 1;
+  std::nth_element(abs_errors.begin(), abs_errors.begin() + static_cast<std::ptrdiff_t>(rank), abs_errors.end());
+  r.p99_abs_error = abs_errors[rank];
+  const auto sny = static_cast<std::size_t>(field.dims[1]);
+  const auto snz = static_cast<std::size_t>(field.dims[2]);
+  r.max_error_at_m =
+      Eigen::Vector3d(field.origin_m[0], field.origin_m[1], field.origin_m[2]) +
+      field.voxel_m * Eigen::Vector3d(static_cast<double>(max_at / (sny * snz)),
+                                      static_cast<double>((max_at / snz) % sny), static_cast<double>(max_at % snz));
+  r.wrong_sign_in_band_percent = 100.0 * static_cast<double>(r.wrong_sign_in_band) / band;
+  r.gross_wrong_sign_percent = 100.0 * static_cast<double>(r.gross_wrong_sign) / static_cast<double>(r.nodes);
+  return r;
+}
+
+std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Truth& truth,
+                                          const EvalOptions& options) {
+  auto grid = TrueDistances(field, truth, std::max(1.0, options.band_voxels));
+  if (!grid) return std::unexpected(grid.error());
+  return Evaluate(field, *grid, options);
+}
+
+std::string ToJson(const EvalResult& r) {
+  return fmt::format(
+      "{{\"nodes\": {}, \"band_nodes\": {}, \"mean_abs_error\": {:.6g}, \"p99_abs_error\": {:.6g}, "
+      "\"max_abs_error\": {:.6g}, \"mean_signed_error\": {:.6g}, \"max_error_at_m\": [{:.9g}, {:.9g}, {:.9g}], "
+      "\"wrong_sign_in_band\": {}, \"wrong_sign_in_band_percent\": {:.6g}, \"gross_wrong_sign\": {}, "
+      "\"gross_wrong_sign_percent\": {:.6g}}}",
+      r.nodes, r.band_nodes, r.mean_abs_error, r.p99_abs_error, r.max_abs_error, r.mean_signed_error,
+      r.max_error_at_m.x(), r.max_error_at_m.y(), r.max_error_at_m.z(), r.wrong_sign_in_band,
+      r.wrong_sign_in_band_percent, r.gross_wrong_sign, r.gross_wrong_sign_percent);
+}
+
+}  // namespace palpa::mesh

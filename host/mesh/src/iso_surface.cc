@@ -1,0 +1,160 @@
+#include "palpa/mesh/iso_surface.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#include <fmt/core.h>
+
+#include "iso_surface_internal.h"
+#include "palpa/mesh/field_file.h"
+
+namespace palpa::mesh {
+namespace {
+
+// The cell holding `p` (clamped into the grid) and the fractions inside it.
+struct Cell {
+  std::array<int, 3> base{};
+  Eigen::Vector3d t;
+  std::array<double, 8> c{};  // c[(di << 2) | (dj << 1) | dk]
+};
+
+Cell Locate(const blob::FieldView& f, const Eigen::Vector3d& p) {
+  Cell cell;
+  for (int a = 0; a < 3; ++a) {
+    const auto s = static_cast<std::size_t>(a);
+    const double hi = f.dims[s] - 1;
+    const double x = std::clamp(p[a], 0.0, hi);
+    cell.base[s] = std::min(static_cast<int>(std::floor(x)), f.dims[s] - 2);
+    cell.t[a] = x - cell.base[s];
+  }
+  for (int corner = 0; corner < 8; ++corner)
+    cell.c[static_cast<std::size_t>(corner)] =
+        PhiVoxels(f, cell.base[0] + (corner >> 2), cell.base[1] + ((corner >> 1) & 1), cell.base[2] + (corner & 1));
+  return cell;
+}
+
+void Append(std::vector<std::byte>& out, const void* data, std::size_t size) {
+  const auto* b = static_cast<const std::byte*>(data);
+  out.insert(out.end(), b, b + size);
+}
+
+}  // namespace
+
+double TrilinearPhi(const blob::FieldView& field, const Eigen::Vector3d& index_point) {
+  const Cell cl = Locate(field, index_point);
+  const double u = cl.t.x();
+  const double v = cl.t.y();
+  const double w = cl.t.z();
+  const auto& c = cl.c;
+  return (1 - u) * ((1 - v) * ((1 - w) * c[0] + w * c[1]) + v * ((1 - w) * c[2] + w * c[3])) +
+         u * ((1 - v) * ((1 - w) * c[4] + w * c[5]) + v * ((1 - w) * c[6] + w * c[7]));
+}
+
+Eigen::Vector3d TrilinearGradient(const blob::FieldView& field, const Eigen::Vector3d& index_point) {
+  const Cell cl = Locate(field, index_point);
+  const double u = cl.t.x();
+  const double v = cl.t.y();
+  const double w = cl.t.z();
+  const auto& c = cl.c;
+  const double gx = (1 - v) * (1 - w) * (c[4] - c[0]) + (1 - v) * w * (c[5] - c[1]) + v * (1 - w) * (c[6] - c[2]) +
+                    v * w * (c[7] - c[3]);
+  const double gy = (1 - u) * (1 - w) * (c[2] - c[0]) + (1 - u) * w * (c[3] - c[1]) + u * (1 - w) * (c[6] - c[4]) +
+                    u * w * (c[7] - c[5]);
+  const double gz = (1 - u) * (1 - v) * (c[1] - c[0]) + (1 - u) * v * (c[3] - c[2]) + u * (1 - v) * (c[5] - c[4]) +
+                    u * v * (c[7] - c[6]);
+  return {gx, gy, gz};
+}
+
+std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& field) {
+  const std::size_t count = static_cast<std::size_t>(field.dims[0]) * static_cast<std::size_t>(field.dims[1]) *
+                            static_cast<std::size_t>(field.dims[2]);
+  const auto [lo, hi] = std::minmax_element(field.phi, field.phi + count);
+  if (*lo > 0 || *hi <= 0)
+    return std::unexpected(
+        Error{fmt::format("no zero crossing: φ ranges over [{:.3f}, {:.3f}] voxels", *lo / 65536.0, *hi / 65536.0)});
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::array<int, 3>> triangles;
+  std::vector<std::array<int, 4>> quads;
+  internal::VolumeToMesh(field, points, triangles, quads);
+
+  TriangleMesh m;
+  m.faces = std::move(triangles);
+  m.faces.reserve(m.faces.size() + 2 * quads.size());
+  for (const auto& q : quads) {
+    auto at = [&](int a) -> const Eigen::Vector3d& {
+      return points[static_cast<std::size_t>(q[static_cast<std::size_t>(a)])];
+    };
+    if ((at(0) - at(2)).squaredNorm() <= (at(1) - at(3)).squaredNorm()) {
+      m.faces.push_back({q[0], q[1], q[2]});
+      m.faces.push_back({q[0], q[2], q[3]});
+    } else {
+      m.faces.push_back({q[0], q[1], q[3]});
+      m.faces.push_back({q[1], q[2], q[3]});
+    }
+  }
+  m.vertices = points;  // index coordinates until the normals are done
+  OrientOutward(m);     // OpenVDB's winding convention, made explicit: outward by enclosed volume
+
+  std::vector<Eigen::Vector3d> face_sum(points.size(), Eigen::Vector3d::Zero());
+  for (std::size_t f = 0; f < m.faces.size(); ++f) {
+    const Eigen::Vector3d n = FaceNormal(m, f);
+    for (const int v : m.faces[f]) face_sum[static_cast<std::size_t>(v)] += n;
+  }
+  m.normals.resize(points.size());
+  const Eigen::Vector3d origin(field.origin_m[0], field.origin_m[1], field.origin_m[2]);
+  for (std::size_t v = 0; v < points.size(); ++v) {
+    const Eigen::Vector3d g = TrilinearGradient(field, points[v]);
+    const double len = g.norm();
+    m.normals[v] = len > 1e-9 ? Eigen::Vector3d(g / len) : face_sum[v].normalized();
+    m.vertices[v] = origin + field.voxel_m * points[v];
+  }
+  return m;
+}
+
+std::vector<std::byte> ToPly(const TriangleMesh& mesh) {
+  const bool normals = mesh.normals.size() == mesh.vertices.size() && !mesh.normals.empty();
+  std::string header = fmt::format(
+      "ply\nformat binary_little_endian 1.0\ncomment palpa mesh: zero iso-surface, device-frame metres\n"
+      "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+      mesh.vertices.size());
+  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  header += fmt::format("element face {}\nproperty list uchar int vertex_indices\nend_header\n", mesh.faces.size());
+  std::vector<std::byte> out;
+  out.reserve(header.size() + mesh.vertices.size() * 24 + mesh.faces.size() * 13);
+  Append(out, header.data(), header.size());
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+    std::array<float, 6> row{};
+    for (int a = 0; a < 3; ++a) {
+      row[static_cast<std::size_t>(a)] = static_cast<float>(mesh.vertices[v][a]);
+      if (normals) row[static_cast<std::size_t>(a + 3)] = static_cast<float>(mesh.normals[v][a]);
+    }
+    Append(out, row.data(), (normals ? 6 : 3) * sizeof(float));  // little-endian host (palpa/fixed/q.h)
+  }
+  for (const auto& f : mesh.faces) {
+    const std::uint8_t three = 3;
+    Append(out, &three, 1);
+    const std::array<std::int32_t, 3> idx{f[0], f[1], f[2]};
+    Append(out, idx.data(), sizeof idx);
+  }
+  return out;
+}
+
+std::string ToObj(const TriangleMesh& mesh) {
+  const bool normals = mesh.normals.size() == mesh.vertices.size() && !mesh.normals.empty();
+  std::string out = "# palpa mesh: zero iso-surface, device-frame metres\n";
+  auto it = std::back_inserter(out);
+  for (const auto& v : mesh.vertices) fmt::format_to(it, "v {:.9g} {:.9g} {:.9g}\n", v.x(), v.y(), v.z());
+  if (normals)
+    for (const auto& n : mesh.normals) fmt::format_to(it, "vn {:.6f} {:.6f} {:.6f}\n", n.x(), n.y(), n.z());
+  for (const auto& f : mesh.faces) {
+    if (normals)
+      fmt::format_to(it, "f {0}//{0} {1}//{1} {2}//{2}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    else
+      fmt::format_to(it, "f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+  }
+  return out;
+}
+
+}  // namespace palpa::mesh

@@ -1,0 +1,81 @@
+// The only translation unit that includes CGAL (slow to compile): keep it small.
+#include <CGAL/AABB_face_graph_triangle_primitive.h>
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Side_of_triangle_mesh.h>
+#include <CGAL/Surface_mesh.h>
+
+#include "palpa/mesh/mesh_distance.h"
+
+namespace palpa::mesh {
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = Kernel::Point_3;
+using Surface = CGAL::Surface_mesh<Point>;
+using Primitive = CGAL::AABB_face_graph_triangle_primitive<Surface>;
+using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+using SideOf = CGAL::Side_of_triangle_mesh<Surface, Kernel, CGAL::Default, Tree>;
+
+Point ToPoint(const Eigen::Vector3d& p) { return {p.x(), p.y(), p.z()}; }
+
+}  // namespace
+
+struct ExactMeshDistance::Impl {
+  Surface surface;
+  Tree tree;
+  std::unique_ptr<SideOf> side;
+};
+
+ExactMeshDistance::ExactMeshDistance(const TriangleMesh& mesh) : impl_(std::make_unique<Impl>()) {
+  Surface& s = impl_->surface;
+  std::vector<Surface::Vertex_index> v;
+  v.reserve(mesh.vertices.size());
+  for (const auto& p : mesh.vertices) v.push_back(s.add_vertex(ToPoint(p)));
+  for (const auto& f : mesh.faces)
+    s.add_face(v[static_cast<std::size_t>(f[0])], v[static_cast<std::size_t>(f[1])], v[static_cast<std::size_t>(f[2])]);
+  impl_->tree.insert(faces(s).first, faces(s).second, s);
+  impl_->tree.build();
+  impl_->tree.accelerate_distance_queries();
+  impl_->side = std::make_unique<SideOf>(impl_->tree);
+  // Any lazily built search structure is built now, on one thread, before concurrent queries.
+  if (!mesh.vertices.empty()) (void)impl_->tree.closest_point(ToPoint(mesh.vertices[0]));
+}
+
+ExactMeshDistance::~ExactMeshDistance() = default;
+
+double ExactMeshDistance::UnsignedDistance(const Eigen::Vector3d& p) const {
+  return std::sqrt(CGAL::to_double(impl_->tree.squared_distance(ToPoint(p))));
+}
+
+double ExactMeshDistance::UnsignedDistance(const Eigen::Vector3d& p, Eigen::Vector3d& hint) const {
+  const Point q = ToPoint(p);
+  const Point c = impl_->tree.closest_point(q, ToPoint(hint));
+  hint = Eigen::Vector3d(c.x(), c.y(), c.z());
+  return std::sqrt(CGAL::to_double(CGAL::squared_distance(q, c)));
+}
+
+Eigen::Vector3d ExactMeshDistance::AnySurfacePoint() const {
+  const Point& v = impl_->surface.point(*impl_->surface.vertices().begin());
+  return {v.x(), v.y(), v.z()};
+}
+
+int ExactMeshDistance::Side(const Eigen::Vector3d& p) const {
+  switch ((*impl_->side)(ToPoint(p))) {
+    case CGAL::ON_BOUNDED_SIDE:
+      return -1;
+    case CGAL::ON_BOUNDARY:
+      return 0;
+    case CGAL::ON_UNBOUNDED_SIDE:
+      return 1;
+  }
+  return 1;
+}
+
+double ExactMeshDistance::SignedDistance(const Eigen::Vector3d& p) const {
+  const int side = Side(p);
+  return side == 0 ? 0.0 : side * UnsignedDistance(p);
+}
+
+}  // namespace palpa::mesh

@@ -1,0 +1,207 @@
+#include "palpa/mesh/triangle_mesh.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <string_view>
+#include <utility>
+
+#include <fmt/core.h>
+
+namespace palpa::mesh {
+namespace {
+
+// Splits a line into whitespace-separated tokens, dropping a `#` comment.
+std::vector<std::string_view> Tokens(std::string_view line) {
+  if (const auto hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
+  std::vector<std::string_view> out;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) ++i;
+    const std::size_t start = i;
+    while (i < line.size() && line[i] != ' ' && line[i] != '\t' && line[i] != '\r') ++i;
+    if (i > start) out.push_back(line.substr(start, i - start));
+  }
+  return out;
+}
+
+template <typename T>
+bool Parse(std::string_view token, T& value) {
+  const char* first = token.data();
+  const char* last = token.data() + token.size();
+  if (first != last && *first == '+') ++first;  // from_chars refuses a leading '+'
+  const auto [ptr, ec] = std::from_chars(first, last, value);
+  return ec == std::errc() && ptr == last;
+}
+
+// Reads the file line by line, handing out only lines that hold tokens.
+class LineReader {
+ public:
+  explicit LineReader(std::ifstream& in) : in_(in) {}
+  bool Next(std::vector<std::string_view>& tokens) {
+    while (std::getline(in_, text_)) {
+      ++line_;
+      tokens = Tokens(text_);
+      if (!tokens.empty()) return true;
+    }
+    return false;
+  }
+  int line() const { return line_; }
+
+ private:
+  std::ifstream& in_;
+  std::string text_;
+  int line_ = 0;
+};
+
+std::uint64_t EdgeKey(int a, int b) {
+  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) | static_cast<std::uint32_t>(b);
+}
+
+}  // namespace
+
+std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) return std::unexpected(Error{file + ": cannot open for reading"});
+  LineReader reader(in);
+  auto fail = [&](const std::string& what) {
+    return std::unexpected(Error{fmt::format("{}:{}: {}", file, reader.line(), what)});
+  };
+
+  std::vector<std::string_view> t;
+  if (!reader.Next(t)) return std::unexpected(Error{file + ": empty file, expected an OFF header"});
+  // The header is `OFF`, optionally followed by the counts on the same line.
+  if (t[0] != "OFF") return fail(fmt::format("expected the 'OFF' header, found '{}'", t[0]));
+  t.erase(t.begin());
+  if (t.empty() && !reader.Next(t)) return fail("expected the counts line 'vertices faces edges'");
+  if (t.size() < 2 || t.size() > 3) return fail("expected the counts line 'vertices faces edges'");
+  long long nv = 0;
+  long long nf = 0;
+  if (!Parse(t[0], nv) || !Parse(t[1], nf)) return fail("vertex and face counts must be integers");
+  if (nv < 4 || nf < 4) return fail(fmt::format("{} vertices and {} faces cannot enclose a volume", nv, nf));
+  constexpr long long kMaxCount = 1LL << 28;
+  if (nv > kMaxCount || nf > kMaxCount) return fail("more than 2^28 vertices or faces");
+
+  TriangleMesh mesh;
+  mesh.vertices.reserve(static_cast<std::size_t>(nv));
+  for (long long v = 0; v < nv; ++v) {
+    if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} vertices", v, nv));
+    if (t.size() < 3) return fail(fmt::format("vertex {} needs 3 coordinates, found {}", v, t.size()));
+    Eigen::Vector3d p;
+    for (int a = 0; a < 3; ++a) {
+      const auto token = t[static_cast<std::size_t>(a)];
+      if (!Parse(token, p[a])) return fail(fmt::format("'{}' is not a number", token));
+      if (!std::isfinite(p[a])) return fail(fmt::format("vertex {} has a non-finite coordinate", v));
+    }
+    mesh.vertices.push_back(p);
+  }
+  mesh.faces.reserve(static_cast<std::size_t>(nf));
+  mesh.face_lines.reserve(static_cast<std::size_t>(nf));
+  for (long long f = 0; f < nf; ++f) {
+    if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} faces", f, nf));
+    int n = 0;
+    if (!Parse(t[0], n)) return fail(fmt::format("'{}' is not a vertex count", t[0]));
+    if (n != 3) return fail(fmt::format("face {} has {} vertices; palpa reads triangle meshes only", f, n));
+    if (t.size() < 4) return fail(fmt::format("face {} lists {} of 3 vertex indices", f, t.size() - 1));
+    std::array<int, 3> face{};
+    for (int a = 0; a < 3; ++a) {
+      const auto token = t[static_cast<std::size_t>(a + 1)];
+      if (!Parse(token, face[static_cast<std::size_t>(a)]))
+        return fail(fmt::format("'{}' is not a vertex index", token));
+      if (face[static_cast<std::size_t>(a)] < 0 || face[static_cast<std::size_t>(a)] >= nv)
+        return fail(fmt::format("vertex index {} is out of range [0, {})", token, nv));
+    }
+    if (face[0] == face[1] || face[1] == face[2] || face[0] == face[2])
+      return fail(fmt::format("face {} repeats a vertex", f));
+    mesh.faces.push_back(face);
+    mesh.face_lines.push_back(reader.line());
+  }
+  if (reader.Next(t)) return fail("unexpected data after the last face");
+  if (in.bad()) return std::unexpected(Error{file + ": read error"});
+  return mesh;
+}
+
+std::expected<void, Error> CheckClosedOriented(const TriangleMesh& mesh, const std::string& name) {
+  // Sorted directed edges (key, face): each must be unique and have its reverse.
+  std::vector<std::pair<std::uint64_t, std::size_t>> edges;
+  edges.reserve(3 * mesh.faces.size());
+  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    for (std::size_t a = 0; a < 3; ++a) edges.emplace_back(EdgeKey(mesh.faces[f][a], mesh.faces[f][(a + 1) % 3]), f);
+  std::sort(edges.begin(), edges.end());
+  auto where = [&](std::size_t f) {
+    return f < mesh.face_lines.size() ? fmt::format("{}:{}: face {}", name, mesh.face_lines[f], f)
+                                      : fmt::format("{}: face {}", name, f);
+  };
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    const auto a = static_cast<int>(edges[e].first >> 32);
+    const auto b = static_cast<int>(edges[e].first & 0xffffffffu);
+    if (e + 1 < edges.size() && edges[e + 1].first == edges[e].first)
+      return std::unexpected(Error{
+          fmt::format("{}: edge {}->{} is also used by face {}: the mesh is non-manifold or inconsistently oriented",
+                      where(edges[e].second), a, b, edges[e + 1].second)});
+    const auto reverse = std::lower_bound(edges.begin(), edges.end(), std::make_pair(EdgeKey(b, a), std::size_t{0}));
+    if (reverse == edges.end() || reverse->first != EdgeKey(b, a))
+      return std::unexpected(Error{
+          fmt::format("{}: edge {}-{} has no opposite face: the mesh must be closed", where(edges[e].second), a, b)});
+  }
+  return {};
+}
+
+double SignedVolume(const TriangleMesh& mesh) {
+  double six_v = 0;
+  for (const auto& f : mesh.faces)
+    six_v += mesh.vertices[static_cast<std::size_t>(f[0])].dot(
+        mesh.vertices[static_cast<std::size_t>(f[1])].cross(mesh.vertices[static_cast<std::size_t>(f[2])]));
+  return six_v / 6.0;
+}
+
+double SurfaceArea(const TriangleMesh& mesh) {
+  double area = 0;
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3d& p0 = mesh.vertices[static_cast<std::size_t>(f[0])];
+    area += 0.5 * (mesh.vertices[static_cast<std::size_t>(f[1])] - p0)
+                      .cross(mesh.vertices[static_cast<std::size_t>(f[2])] - p0)
+                      .norm();
+  }
+  return area;
+}
+
+bool OrientOutward(TriangleMesh& mesh) {
+  if (SignedVolume(mesh) >= 0) return false;
+  for (auto& f : mesh.faces) std::swap(f[1], f[2]);
+  for (auto& n : mesh.normals) n = -n;
+  return true;
+}
+
+std::expected<TriangleMesh, Error> ReadClosedMesh(const std::filesystem::path& path, bool* flipped) {
+  auto mesh = ReadOff(path);
+  if (!mesh) return mesh;
+  if (auto ok = CheckClosedOriented(*mesh, path.string()); !ok) return std::unexpected(ok.error());
+  // Relative to the bounding box, so that the test does not depend on the model's units.
+  Eigen::Vector3d lo = mesh->vertices[0];
+  Eigen::Vector3d hi = lo;
+  for (const auto& v : mesh->vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  const double extent = (hi - lo).maxCoeff();
+  if (!(std::abs(SignedVolume(*mesh)) > 1e-12 * extent * extent * extent))
+    return std::unexpected(Error{path.string() + ": the mesh encloses no volume"});
+  const bool f = OrientOutward(*mesh);
+  if (flipped != nullptr) *flipped = f;
+  return mesh;
+}
+
+Eigen::Vector3d FaceNormal(const TriangleMesh& mesh, std::size_t f) {
+  const auto& t = mesh.faces[f];
+  const Eigen::Vector3d& p0 = mesh.vertices[static_cast<std::size_t>(t[0])];
+  const Eigen::Vector3d n =
+      (mesh.vertices[static_cast<std::size_t>(t[1])] - p0).cross(mesh.vertices[static_cast<std::size_t>(t[2])] - p0);
+  const double len = n.norm();
+  return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
+}
+
+}  // namespace palpa::mesh

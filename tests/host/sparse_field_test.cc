@@ -1,0 +1,247 @@
+// SparseField's brick labelling and Lipschitz projection against hand-computed values and an
+// independent dense reference (Bellman-Ford on the projection's definition).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include "palpa/field/sparse_field.h"
+
+namespace palpa::field {
+namespace {
+
+constexpr float kStep = SparseField::kLipschitzStep;
+
+GridSpec Grid(int nx, int ny, int nz, int band) {
+  GridSpec g;
+  g.dims = {nx, ny, nz};
+  g.voxel_m = 1.0;
+  g.band_voxels = band;
+  return g;
+}
+
+// Allocates every brick and writes `phi(i, j, k)` into every grid node.
+template <class F>
+SparseField AllAllocated(const GridSpec& g, F&& phi) {
+  SparseField f(g);
+  const auto& bd = f.brick_dims();
+  std::vector<std::uint8_t> all(static_cast<std::size_t>(bd[0] * bd[1] * bd[2]), 1);
+  f.AllocateAll(all);
+  constexpr int kB = SparseField::kBrick;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k)
+        f.BrickValues(f.BrickIndex(i / kB, j / kB, k / kB))[((i % kB) * kB + (j % kB)) * kB + (k % kB)] = phi(i, j, k);
+  return f;
+}
+
+float MaxNeighbourDifference(const SparseField& f) {
+  const GridSpec& g = f.grid();
+  float worst = 0.0f;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) {
+        const float v = f.Value(i, j, k);
+        if (i + 1 < g.dims[0]) worst = std::max(worst, std::abs(f.Value(i + 1, j, k) - v));
+        if (j + 1 < g.dims[1]) worst = std::max(worst, std::abs(f.Value(i, j + 1, k) - v));
+        if (k + 1 < g.dims[2]) worst = std::max(worst, std::abs(f.Value(i, j, k + 1) - v));
+      }
+  return worst;
+}
+
+// A profile along x (the same on every row), worked by hand:
+//   input   6    6    6    5    1    0.3  -0.2  -3   -6   -6 ...
+//   the pair (0.3, -0.2) sums to 0.5 <= step: no interface scaling;
+//   outside, from the 1 at i = 4: 1 + step, 1 + 2 step, ... wherever the input is larger;
+//   inside, from -0.2 at i = 6: -(0.2 + step), -(0.2 + 2 step), ...
+TEST(ProjectLipschitz, HandComputedProfile) {
+  const std::vector<float> input = {6, 6, 6, 5, 1, 0.3f, -0.2f, -3, -6, -6, -6, -6, -6, -6, -6, -6, -6, -6};
+  const GridSpec g = Grid(static_cast<int>(input.size()), 9, 5, 6);
+  SparseField f = AllAllocated(g, [&](int i, int, int) { return input[static_cast<std::size_t>(i)]; });
+  const SparseField::LipschitzStats st = f.ProjectLipschitz();
+  std::vector<float> expected(input.size());
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    if (i <= 4) {
+      float v = 1.0f;
+      for (std::size_t s = i; s < 4; ++s) v = v + kStep;  // the projection's own float steps
+      expected[i] = std::min(input[i], v);
+    } else if (i == 5) {
+      expected[i] = 0.3f;
+    } else {
+      float v = 0.2f;
+      for (std::size_t s = 6; s < i; ++s) v = v + kStep;
+      expected[i] = -std::min(-input[i], v);
+    }
+  }
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) ASSERT_EQ(f.Value(i, j, k), expected[static_cast<std::size_t>(i)]) << i;
+  EXPECT_EQ(st.interface_nodes_scaled, 0u);
+  EXPECT_EQ(st.sign_conflict_nodes, 0u);
+  EXPECT_LE(MaxNeighbourDifference(f), kStep * (1 + 1e-6f));  // (1 + step) - 1 rounds
+}
+
+// Opposite signs summing to more than a step are scaled together: 0.8 and -0.6 (sum 1.4) become
+// 0.8 step/1.4 and -0.6 step/1.4, so the linear zero crossing stays at 0.8/1.4 of the edge.
+TEST(ProjectLipschitz, InterfaceScalingKeepsTheZeroCrossing) {
+  const GridSpec g = Grid(8, 8, 8, 6);
+  SparseField f = AllAllocated(g, [](int i, int, int) {
+    return i < 4 ? 0.8f + static_cast<float>(3 - i) * 0.5f : -0.6f - static_cast<float>(i - 4) * 0.5f;
+  });
+  const SparseField::LipschitzStats st = f.ProjectLipschitz();
+  const float a = f.Value(3, 2, 2), b = f.Value(4, 2, 2);
+  EXPECT_FLOAT_EQ(a, 0.8f * kStep / 1.4f);
+  EXPECT_FLOAT_EQ(b, -0.6f * kStep / 1.4f);
+  EXPECT_NEAR(a / (a - b), 0.8 / 1.4, 1e-6);
+  EXPECT_EQ(st.interface_nodes_scaled, 2u * 64u);
+  EXPECT_LE(MaxNeighbourDifference(f), kStep * (1 + 1e-6f));
+}
+
+// The projection's definition, computed independently on a dense array: the interface pass as
+// stated, then Bellman-Ford (Jacobi) on |phi(x)| <- min(|phi(x)|, |phi(y)| + step) over same-sign
+// axis neighbours until nothing changes.
+std::vector<float> DenseReference(const GridSpec& g, std::vector<float> phi) {
+  const int nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];
+  const auto neighbours = [&](int i, int j, int k, auto&& fn) {
+    const int d[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+    for (const auto& o : d) {
+      const int a = i + o[0], b = j + o[1], c = k + o[2];
+      if (a >= 0 && b >= 0 && c >= 0 && a < nx && b < ny && c < nz) fn(g.Index(a, b, c));
+    }
+  };
+  std::vector<float> scaled = phi;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j)
+      for (int k = 0; k < nz; ++k) {
+        const float v = phi[g.Index(i, j, k)];
+        float s = 1.0f;
+        neighbours(i, j, k, [&](std::size_t y) {
+          const float u = phi[y];
+          if ((u <= 0.0f) != (v <= 0.0f) && std::abs(v) + std::abs(u) > kStep)
+            s = std::min(s, kStep / (std::abs(v) + std::abs(u)));
+        });
+        if (s < 1.0f) scaled[g.Index(i, j, k)] = v <= 0.0f ? v * s : std::max(v * s, 1.17549435e-38f);
+      }
+  for (bool changed = true; changed;) {
+    changed = false;
+    std::vector<float> next = scaled;
+    for (int i = 0; i < nx; ++i)
+      for (int j = 0; j < ny; ++j)
+        for (int k = 0; k < nz; ++k) {
+          const std::size_t x = g.Index(i, j, k);
+          const float v = scaled[x];
+          float m = std::abs(v);
+          neighbours(i, j, k, [&](std::size_t y) {
+            if ((scaled[y] <= 0.0f) == (v <= 0.0f)) m = std::min(m, std::abs(scaled[y]) + kStep);
+          });
+          if (m < std::abs(v)) {
+            next[x] = v <= 0.0f ? -m : m;
+            changed = true;
+          }
+        }
+    scaled.swap(next);
+  }
+  return scaled;
+}
+
+TEST(ProjectLipschitz, EqualsDenseReferenceOnRoughFieldsForAnyThreadCount) {
+  const GridSpec g = Grid(29, 21, 17, 6);  // partial bricks on every axis
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> noise(-2.5f, 2.5f);
+  std::vector<float> input(g.NodeCount());
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) {
+        // Two blobs (a wavy surface) plus noise that breaks the 1-Lipschitz property everywhere.
+        const double d =
+            std::min(std::hypot(i - 9.0, j - 10.0, k - 8.0) - 6.0, std::hypot(i - 21.0, j - 9.0, k - 7.0) - 5.0);
+        input[g.Index(i, j, k)] = std::clamp(1.6f * static_cast<float>(d) + noise(rng), -6.0f, 6.0f);
+      }
+  const std::vector<float> reference = DenseReference(g, input);
+  for (const std::size_t threads : {1u, 2u}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    SparseField f = AllAllocated(g, [&](int i, int j, int k) { return input[g.Index(i, j, k)]; });
+    const SparseField::LipschitzStats st = f.ProjectLipschitz();
+    std::size_t mismatches = 0, sign_changes = 0, raised = 0;
+    for (int i = 0; i < g.dims[0]; ++i)
+      for (int j = 0; j < g.dims[1]; ++j)
+        for (int k = 0; k < g.dims[2]; ++k) {
+          const std::size_t x = g.Index(i, j, k);
+          const float v = f.Value(i, j, k);
+          mismatches += v != reference[x] ? 1u : 0u;
+          sign_changes += (v <= 0.0f) != (input[x] <= 0.0f) ? 1u : 0u;
+          raised += std::abs(v) > std::abs(input[x]) ? 1u : 0u;
+        }
+    std::printf("[ rough field, %zu threads ] %zu interface nodes scaled, %zu updates, %d sweeps\n", threads,
+                st.interface_nodes_scaled, st.node_updates, st.sweeps);
+    EXPECT_EQ(mismatches, 0u);
+    EXPECT_EQ(sign_changes, 0u);
+    EXPECT_EQ(raised, 0u);
+    EXPECT_GT(st.node_updates, 1000u);
+    EXPECT_LE(MaxNeighbourDifference(f), 1.0f);
+  }
+}
+
+// A uniform brick next to an allocated brick whose values are far below the band must take
+// values (allocated with its uniform value, then lowered).
+TEST(ProjectLipschitz, AllocatesUniformBricksThatMustChange) {
+  const GridSpec g = Grid(24, 8, 8, 6);  // bricks 0, 1, 2 along x
+  SparseField f(g);
+  float* v = f.Allocate(f.BrickIndex(1, 0, 0));
+  std::fill(v, v + SparseField::kBrickNodes, 2.0f);  // outside, 2 voxels: its neighbours at +6 break the bound
+  const SparseField::LipschitzStats st = f.ProjectLipschitz();
+  EXPECT_EQ(st.bricks_allocated, 2u);
+  EXPECT_EQ(f.Value(7, 3, 3), 2.0f + kStep);
+  EXPECT_EQ(f.Value(16, 3, 3), 2.0f + kStep);
+  EXPECT_EQ(f.Value(0, 3, 3), 6.0f);  // 2 + 8 steps > band
+  EXPECT_LE(MaxNeighbourDifference(f), kStep * (1 + 1e-6f));
+}
+
+// Labelling by the evaluated nodes facing each component: a hollow ball (solid shell between radii
+// 20 and 30) whose cavity is outside. A flood fill from the grid boundary would call the cavity
+// inside; the component vote gets both the cavity and the shell's interior right.
+TEST(LabelUnallocatedBricks, HollowBallCavityIsOutside) {
+  const GridSpec g = Grid(80, 80, 80, 3);
+  const auto sdf = [](double i, double j, double k) {
+    const double r = std::hypot(i - 39.5, j - 39.5, k - 39.5);
+    return std::max(20.0 - r, r - 30.0);  // negative in the shell 20 < r < 30
+  };
+  SparseField f(g);
+  constexpr int kB = SparseField::kBrick;
+  const auto& bd = f.brick_dims();
+  for (int bi = 0; bi < bd[0]; ++bi)
+    for (int bj = 0; bj < bd[1]; ++bj)
+      for (int bk = 0; bk < bd[2]; ++bk) {
+        const double centre = sdf(bi * kB + 3.5, bj * kB + 3.5, bk * kB + 3.5);
+        if (std::abs(centre) >= 3 + 6.1) continue;  // no band node in this brick
+        float* v = f.Allocate(f.BrickIndex(bi, bj, bk));
+        for (int a = 0; a < kB; ++a)
+          for (int b = 0; b < kB; ++b)
+            for (int c = 0; c < kB; ++c)
+              v[(a * kB + b) * kB + c] =
+                  static_cast<float>(std::clamp(sdf(bi * kB + a, bj * kB + b, bk * kB + c), -3.0, 3.0));
+      }
+  const std::size_t minority = f.LabelUnallocatedBricks();
+  EXPECT_EQ(minority, 0u);
+  std::size_t wrong = 0, uniform = 0, cavity = 0;
+  for (int bi = 0; bi < bd[0]; ++bi)
+    for (int bj = 0; bj < bd[1]; ++bj)
+      for (int bk = 0; bk < bd[2]; ++bk) {
+        const std::int32_t slot = f.Slot(f.BrickIndex(bi, bj, bk));
+        if (slot >= 0) continue;
+        ++uniform;
+        const double centre = sdf(bi * kB + 3.5, bj * kB + 3.5, bk * kB + 3.5);
+        cavity += std::hypot(bi * kB + 3.5 - 39.5, bj * kB + 3.5 - 39.5, bk * kB + 3.5 - 39.5) < 20.0 ? 1u : 0u;
+        wrong += (slot == SparseField::kUniformInside) != (centre < 0) ? 1u : 0u;
+      }
+  EXPECT_GT(uniform, 0u);
+  EXPECT_GT(cavity, 0u);
+  EXPECT_EQ(wrong, 0u);
+}
+
+}  // namespace
+}  // namespace palpa::field

@@ -1,0 +1,299 @@
+// palpa eval: true distances (analytic sphere; CGAL on meshes checked against analytic boxes and
+// spheres and against per-node exact queries) and the score, on fields with known errors.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <string>
+
+#include "field_fixtures.h"
+#include "palpa/mesh/eval.h"
+#include "palpa/mesh/mesh_distance.h"
+#include "tools_test_util.h"
+
+namespace palpa::tools_test {
+namespace {
+
+using mesh::EvalResult;
+using mesh::Truth;
+
+TEST(Eval, ExactSphereFieldScoresZero) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  auto r = mesh::Evaluate(View(bytes), Truth::Sphere(kSphereRadiusModel));
+  ASSERT_TRUE(r) << r.error().message;
+  // Only Q16.16 rounding (≤ 2^-17 voxel) and float truth rounding remain.
+  EXPECT_LT(r->max_abs_error, 1e-5);
+  EXPECT_LT(r->mean_abs_error, 1e-5);
+  EXPECT_LT(std::abs(r->mean_signed_error), 1e-5);
+  EXPECT_EQ(r->wrong_sign_in_band, 0u);
+  EXPECT_EQ(r->gross_wrong_sign, 0u);
+  EXPECT_EQ(r->nodes, 64u * 60u * 66u);
+  // Band nodes: a shell of radii 17..23 voxels holds about 4/3·π·(23³ − 17³) ≈ 30,387 nodes.
+  EXPECT_NEAR(static_cast<double>(r->band_nodes), 4.0 / 3.0 * M_PI * (23 * 23 * 23 - 17 * 17 * 17), 300);
+}
+
+// φ = true + 0.5 voxel: every band error is +0.5, and exactly the nodes with true in (−0.5, 0)
+// read positive while inside (wrong sign); none of them is more than 1 voxel from the surface.
+TEST(Eval, ConstantOffsetIsTheMeanSignedError) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x) + 0.5; });
+  auto r = mesh::Evaluate(View(bytes), Truth::Sphere(kSphereRadiusModel));
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_NEAR(r->mean_signed_error, 0.5, 1e-5);
+  EXPECT_NEAR(r->mean_abs_error, 0.5, 1e-5);
+  EXPECT_NEAR(r->p99_abs_error, 0.5, 1e-5);
+  EXPECT_NEAR(r->max_abs_error, 0.5, 1e-5);
+  std::size_t band = 0;
+  std::size_t wrong = 0;
+  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
+    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
+      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
+        const double t = SphereSdfVoxels(s, s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
+        band += std::abs(t) <= 3;
+        wrong += t < 0 && t > -0.5;
+      }
+  EXPECT_EQ(r->band_nodes, band);
+  EXPECT_EQ(r->wrong_sign_in_band, wrong);
+  EXPECT_GT(wrong, 1000u);
+  EXPECT_NEAR(r->wrong_sign_in_band_percent, 100.0 * static_cast<double>(wrong) / static_cast<double>(band), 1e-9);
+  EXPECT_EQ(r->gross_wrong_sign, 0u);
+}
+
+// Errors of known size at known nodes: p99 and max pick them out; flipped far nodes are gross.
+TEST(Eval, PercentileMaxAndGrossSignsOnPlantedErrors) {
+  const BlobSpec s = SphereSpec();
+  const Eigen::Vector3d centre = s.fit_offset_m;
+  // +2 voxels on the cap x > centre + 19.5 mm, inside the band; a flipped sign deep inside
+  // (|x − c| < 5 mm, true ≈ −15..−20 voxels, clamped to −band = −6).
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) {
+    const double t = SphereSdfVoxels(s, x);
+    if ((x - centre).norm() < 5e-3) return -t;
+    return x.x() > centre.x() + 19.5e-3 ? t + 2 : t;
+  });
+  auto r = mesh::Evaluate(View(bytes), Truth::Sphere(kSphereRadiusModel));
+  ASSERT_TRUE(r) << r.error().message;
+  std::size_t planted = 0;
+  std::size_t planted_wrong = 0;  // inside by less than 2 voxels: +2 makes them read outside
+  std::size_t deep = 0;
+  std::size_t band = 0;
+  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
+    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
+      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
+        const Eigen::Vector3d x = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
+        const double t = SphereSdfVoxels(s, x);
+        band += std::abs(t) <= 3;
+        planted += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3;
+        planted_wrong += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3 && t < 0 && t + 2 > 0;
+        deep += (x - centre).norm() < 5e-3;
+      }
+  ASSERT_GT(planted, 0u);
+  EXPECT_NEAR(r->max_abs_error, 2.0, 1e-5);
+  EXPECT_NEAR(r->max_error_at_m.x(), centre.x() + 20e-3, 3.5e-3);  // on the cap, in the band
+  EXPECT_NEAR(r->mean_abs_error, 2.0 * static_cast<double>(planted) / static_cast<double>(band), 1e-5);
+  // p99 is 2 iff more than 1 % of the band was planted.
+  EXPECT_NEAR(r->p99_abs_error, static_cast<double>(planted) > 0.01 * static_cast<double>(band) ? 2.0 : 0.0, 1e-5);
+  EXPECT_EQ(r->gross_wrong_sign, deep);
+  EXPECT_NEAR(r->gross_wrong_sign_percent, 100.0 * static_cast<double>(deep) / static_cast<double>(r->nodes), 1e-9);
+  EXPECT_EQ(r->wrong_sign_in_band, planted_wrong);
+  EXPECT_GT(planted_wrong, 0u);
+}
+
+// A box's signed distance is known in closed form; its 12 large triangles exercise both the
+// near-node candidates and the flood-filled far regions (deep inside and outside).
+TEST(TrueDistances, MeshBoxMatchesTheClosedForm) {
+  BlobSpec s;
+  s.dims = {40, 36, 44};
+  s.voxel_m = 1e-3;
+  s.origin_m = Eigen::Vector3d(-0.02, -0.018, -0.022);
+  s.fit_scale = 1e-3;  // model millimetres
+  s.fit_offset_m = Eigen::Vector3d(0.0003, 0, -0.0002);
+  const Eigen::Vector3d lo(-12.3, -9.1, -14.7);
+  const Eigen::Vector3d hi(11.6, 10.2, 13.9);
+  const auto bytes = MakeBlob(s, [](const Eigen::Vector3d&) { return 0.0; });
+  auto truth = mesh::TrueDistances(View(bytes), Truth::Mesh(Box(lo, hi)), 3);
+  ASSERT_TRUE(truth) << truth.error().message;
+  std::size_t exact = 0;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 36; ++j)
+      for (int k = 0; k < 44; ++k) {
+        const Eigen::Vector3d x_m = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
+        const Eigen::Vector3d p = (x_m - s.fit_offset_m) / s.fit_scale;  // model mm
+        const Eigen::Vector3d c = 0.5 * (lo + hi);
+        const Eigen::Vector3d q = (p - c).cwiseAbs() - 0.5 * (hi - lo);
+        const double sdf_mm = q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+        const double expect = sdf_mm * s.fit_scale / s.voxel_m;
+        const float got = truth->voxels[(static_cast<std::size_t>(i) * 36 + static_cast<std::size_t>(j)) * 44 +
+                                        static_cast<std::size_t>(k)];
+        if (std::abs(expect) <= 3) {
+          ++exact;
+          ASSERT_NEAR(got, expect, 1e-5) << i << " " << j << " " << k;
+        } else {
+          ASSERT_EQ(std::signbit(got), std::signbit(expect)) << i << " " << j << " " << k;
+          ASSERT_TRUE(std::isinf(got) || std::abs(got - expect) < 1e-5) << got << " vs " << expect;
+        }
+      }
+  EXPECT_GT(exact, 10000u);
+}
+
+// knot1 (genus 1, thin tube) through a fit transform: the grid truth equals per-node exact
+// queries (the candidate and flood-fill shortcuts change nothing), on 1 and 2 threads alike.
+TEST(TrueDistances, MeshKnotMatchesPerNodeQueriesOnAnyThreadCount) {
+  auto knot = mesh::ReadClosedMesh(DataFile("knot1.off"));
+  ASSERT_TRUE(knot) << knot.error().message;
+  BlobSpec s;
+  s.dims = {48, 50, 30};
+  s.voxel_m = 1e-3;
+  s.fit_scale = 0.04;  // the knot spans about 1 model unit → 40 mm
+  s.origin_m = Eigen::Vector3d(-0.0235, -0.0245, -0.0145);
+  s.fit_offset_m = Eigen::Vector3d(0, 0, 0);
+  // Centre the knot's bounding box in the grid.
+  Eigen::Vector3d lo = knot->vertices[0];
+  Eigen::Vector3d hi = lo;
+  for (const auto& v : knot->vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  s.fit_offset_m = -s.fit_scale * 0.5 * (lo + hi);
+  const auto bytes = MakeBlob(s, [](const Eigen::Vector3d&) { return 0.0; });
+  const blob::FieldView view = View(bytes);
+  std::vector<float> one;
+  std::vector<float> two;
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+    auto t = mesh::TrueDistances(view, Truth::Mesh(*knot), 3);
+    ASSERT_TRUE(t) << t.error().message;
+    one = t->voxels;
+  }
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
+    auto t = mesh::TrueDistances(view, Truth::Mesh(*knot), 3);
+    ASSERT_TRUE(t);
+    two = t->voxels;
+  }
+  EXPECT_EQ(one, two);
+
+  mesh::TriangleMesh device = *knot;  // in node index coordinates, as the reference query wants
+  for (auto& v : device.vertices) v = (s.fit_scale * v + s.fit_offset_m - s.origin_m) / s.voxel_m;
+  const mesh::ExactMeshDistance exact(device);
+  std::size_t inside = 0;
+  std::size_t near = 0;
+  for (std::size_t n = 0; n < one.size(); n += 7) {  // every 7th node: all parities of i, j, k
+    const Eigen::Vector3d p(static_cast<double>(n / (50 * 30)), static_cast<double>((n / 30) % 50),
+                            static_cast<double>(n % 30));
+    const double expect = exact.SignedDistance(p);
+    if (std::abs(expect) <= 3) {
+      ++near;
+      ASSERT_NEAR(one[n], expect, 1e-5) << p.transpose();
+    } else {
+      ASSERT_EQ(std::signbit(one[n]), std::signbit(expect)) << p.transpose();
+    }
+    inside += expect < 0;
+  }
+  EXPECT_GT(near, 1000u);
+  EXPECT_GT(inside, 100u);
+}
+
+// A finely tessellated sphere as a mesh truth agrees with the analytic sphere to within the
+// tessellation's sagitta (< 0.01 voxel here), and scores an analytic field near zero.
+TEST(TrueDistances, IcosphereMeshAgreesWithTheAnalyticSphere) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  const blob::FieldView view = View(bytes);
+  auto mesh_truth = mesh::TrueDistances(view, Truth::Mesh(Icosphere(5, kSphereRadiusModel)), 3);
+  auto sphere_truth = mesh::TrueDistances(view, Truth::Sphere(kSphereRadiusModel), 3);
+  ASSERT_TRUE(mesh_truth && sphere_truth);
+  for (std::size_t n = 0; n < mesh_truth->voxels.size(); ++n) {
+    const float a = sphere_truth->voxels[n];
+    const float m = mesh_truth->voxels[n];
+    // Chords lie inside the sphere, so m ≥ a; nodes just inside |a| = 3 may be just beyond the
+    // mesh's exact range (m = +∞ there).
+    if (std::abs(a) <= 2.99 || (std::abs(a) <= 3 && std::isfinite(m))) {
+      ASSERT_LE(std::abs(m - a), 0.01) << n;
+      ASSERT_GE(m - a, -1e-5) << n;
+    } else if (std::abs(a) > 0.01) {
+      ASSERT_EQ(std::signbit(m), std::signbit(a)) << n;
+    }
+  }
+  auto r = mesh::Evaluate(view, *mesh_truth);
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_LT(r->max_abs_error, 0.01);
+  EXPECT_EQ(r->gross_wrong_sign, 0u);
+}
+
+TEST(Eval, RefusesMismatchedGridsAndBands) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  BlobSpec other = s;
+  other.origin_m.x() += 1e-3;
+  const auto bytes2 = MakeBlob(other, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(other, x); });
+  auto truth = mesh::TrueDistances(View(bytes), Truth::Sphere(kSphereRadiusModel));
+  ASSERT_TRUE(truth);
+  EXPECT_FALSE(mesh::Evaluate(View(bytes2), *truth));
+  mesh::EvalOptions wide;
+  wide.band_voxels = 7;  // the field's band is 6
+  EXPECT_FALSE(mesh::Evaluate(View(bytes), *truth, wide));
+  EXPECT_FALSE(mesh::TrueDistances(View(bytes), Truth::Sphere(-1)));
+  mesh::TriangleMesh open = Box({0, 0, 0}, {1, 1, 1});
+  open.faces.pop_back();
+  EXPECT_FALSE(mesh::TrueDistances(View(bytes), Truth::Mesh(open)));
+}
+
+class EvalCli : public TempDirTest {};
+
+double JsonNumber(const std::string& json, const std::string& key) {
+  const auto at = json.find("\"" + key + "\": ");
+  if (at == std::string::npos) return std::nan("");
+  return std::stod(json.substr(at + key.size() + 4));
+}
+
+TEST_F(EvalCli, SphereAndMeshTruthsAsAUserRunsThem) {
+  const BlobSpec s = SphereSpec();
+  const std::string field = Path("offset.palpa");
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x) + 0.5; });
+  {
+    std::ofstream(field, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  }
+  const Outcome r = Palpa("eval " + field + " --sphere 10 --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NEAR(JsonNumber(r.out, "mean_signed_error"), 0.5, 1e-4) << r.out;
+  EXPECT_NEAR(JsonNumber(r.out, "max_abs_error"), 0.5, 1e-4) << r.out;
+  EXPECT_EQ(JsonNumber(r.out, "gross_wrong_sign"), 0) << r.out;
+  // The same sphere as a tessellated mesh file (model units) gives the same score to the sagitta.
+  const std::string off = Write("sphere.off", ToOff(Icosphere(5, kSphereRadiusModel)));
+  const Outcome m = Palpa("eval " + field + " --mesh " + off);
+  ASSERT_EQ(m.code, 0) << m.out;
+  EXPECT_NE(m.out.find("mean signed error   +0.49"), std::string::npos) << m.out;
+}
+
+TEST_F(EvalCli, BadInputsExitTwo) {
+  const BlobSpec s = SphereSpec();
+  const std::string field = Path("f.palpa");
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  {
+    std::ofstream(field, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  }
+  struct Case {
+    std::string args, expect;
+  };
+  const std::string bad_off = Write("bad.off", "OFF\n4 4 0\n0 0 0\n");
+  const Case cases[] = {
+      {"eval " + field, "exactly one truth"},
+      {"eval " + field + " --sphere 10 --mesh " + bad_off, "excludes"},
+      {"eval " + field + " --mesh " + bad_off, "bad.off:3"},
+      {"eval " + Path("missing.palpa") + " --sphere 10", "missing.palpa"},
+      {"eval " + bad_off + " --sphere 10", "bad.off"},
+      {"eval " + field + " --sphere 10 --band 7", "narrow band of 6 voxels"},
+      {"eval " + field + " --sphere 0", "positive radius"},
+  };
+  for (const Case& c : cases) {
+    const Outcome r = Palpa(c.args);
+    EXPECT_EQ(r.code, 2) << c.args << "\n" << r.out;
+    EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.args << "\n" << r.out;
+  }
+}
+
+}  // namespace
+}  // namespace palpa::tools_test

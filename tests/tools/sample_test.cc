@@ -1,0 +1,235 @@
+// OFF reader and area-uniform oriented-point sampler, against meshes whose geometry is known
+// exactly (boxes, icospheres) and the bundled CGAL meshes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "palpa/field/point_io.h"
+#include "palpa/mesh/sample.h"
+#include "palpa/mesh/triangle_mesh.h"
+#include "tools_test_util.h"
+
+namespace palpa::tools_test {
+namespace {
+
+using mesh::TriangleMesh;
+
+// First line of `palpa sample data/knot1.off -n 1000 --seed 1`: a change detector, so that a
+// change of sampling algorithm (which changes every measured figure) is a visible decision.
+constexpr const char* kKnotSeed1First =
+    "-0.435955253 -0.164356289 0.0731109677 -0.870767464 -0.490338402 -0.0365003452";
+
+TEST(ReadOff, BundledMeshesAreClosedAndOriented) {
+  struct Case {
+    const char* name;
+    std::size_t v, f;
+  };
+  for (const Case& c :
+       {Case{"sphere.off", 162, 320}, Case{"fandisk.off", 6475, 12946}, Case{"knot1.off", 3200, 6400}}) {
+    auto m = mesh::ReadOff(DataFile(c.name));
+    ASSERT_TRUE(m) << m.error().message;
+    EXPECT_EQ(m->vertices.size(), c.v) << c.name;
+    EXPECT_EQ(m->faces.size(), c.f) << c.name;
+    EXPECT_TRUE(mesh::CheckClosedOriented(*m, c.name)) << c.name;
+  }
+  // sphere.off: vertices on the sphere of radius 0.5 (its first vertex is (0, 0.5, 0)).
+  auto m = mesh::ReadOff(DataFile("sphere.off"));
+  ASSERT_TRUE(m);
+  for (const auto& v : m->vertices) EXPECT_NEAR(v.norm(), 0.5, 1e-3);
+  EXPECT_TRUE(m->vertices[0].isApprox(Eigen::Vector3d(0, 0.5, 0)));
+}
+
+class OffErrors : public TempDirTest {};
+
+TEST_F(OffErrors, NameTheFileAndLine) {
+  const std::string tet_v = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
+  const std::string tet_f = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  struct Case {
+    std::string text, expect;
+  };
+  const Case cases[] = {
+      {"PLY\n", "bad.off:1: expected the 'OFF' header, found 'PLY'"},
+      {"OFF\n4 4\n" + tet_v + tet_f, ""},  // valid: two counts are allowed
+      {"OFF\n# comment\n4 x 0\n", "bad.off:3: vertex and face counts must be integers"},
+      {"OFF\n4 4 0\n0 0 0\n1 0 zero\n", "bad.off:4: 'zero' is not a number"},
+      {"OFF\n4 4 0\n0 0 0\n1 0\n", "bad.off:4: vertex 1 needs 3 coordinates"},
+      {"OFF\n4 4 0\n0 0 0\n1 0 inf\n", "bad.off:4: vertex 1 has a non-finite coordinate"},
+      {"OFF\n4 4 0\n" + tet_v + "4 0 1 2 3\n", "bad.off:7: face 0 has 4 vertices; palpa reads triangle meshes only"},
+      {"OFF\n4 4 0\n" + tet_v + "3 0 1 4\n", "bad.off:7: vertex index 4 is out of range [0, 4)"},
+      {"OFF\n4 4 0\n" + tet_v + "3 0 1 1\n", "bad.off:7: face 0 repeats a vertex"},
+      {"OFF\n4 4 0\n" + tet_v + "3 0 2 1\n", "bad.off:7: file ends after 1 of 4 faces"},
+      {"OFF\n4 4 0\n" + tet_v + tet_f + "1 2 3\n", "bad.off:11: unexpected data after the last face"},
+  };
+  for (const Case& c : cases) {
+    const std::string path = Write("bad.off", c.text);
+    auto m = mesh::ReadOff(path);
+    if (c.expect.empty()) {
+      EXPECT_TRUE(m) << c.text << (m ? "" : m.error().message);
+      continue;
+    }
+    ASSERT_FALSE(m) << c.text;
+    EXPECT_NE(m.error().message.find(c.expect), std::string::npos) << m.error().message;
+    EXPECT_EQ(m.error().message.rfind(path, 0), 0u) << m.error().message;
+  }
+  auto missing = mesh::ReadOff(Path("missing.off"));
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.error().message.find("missing.off"), std::string::npos);
+}
+
+TEST_F(OffErrors, OpenOrInconsistentMeshesAreRefusedWithTheFaceLine) {
+  TriangleMesh box = Box({0, 0, 0}, {1, 1, 1});
+  TriangleMesh open = box;
+  open.faces.pop_back();
+  auto m = mesh::ReadClosedMesh(Write("open.off", ToOff(open)));
+  ASSERT_FALSE(m);
+  EXPECT_NE(m.error().message.find("open.off:"), std::string::npos) << m.error().message;
+  EXPECT_NE(m.error().message.find("no opposite face: the mesh must be closed"), std::string::npos)
+      << m.error().message;
+
+  TriangleMesh twisted = box;
+  std::swap(twisted.faces[5][1], twisted.faces[5][2]);  // one face wound against its neighbours
+  m = mesh::ReadClosedMesh(Write("twisted.off", ToOff(twisted)));
+  ASSERT_FALSE(m);
+  EXPECT_NE(m.error().message.find("inconsistently oriented"), std::string::npos) << m.error().message;
+
+  TriangleMesh flat = box;  // closed but zero volume: the top face pushed down onto the bottom
+  for (auto& v : flat.vertices) v.z() = 0;
+  EXPECT_FALSE(mesh::ReadClosedMesh(Write("flat.off", ToOff(flat))));
+}
+
+TEST(SignedVolume, BoxAndIcosphere) {
+  TriangleMesh box = Box({-1, 0, 2}, {1, 3, 6});
+  EXPECT_NEAR(mesh::SignedVolume(box), 2 * 3 * 4, 1e-12);
+  EXPECT_NEAR(mesh::SurfaceArea(box), 2 * (2 * 3 + 3 * 4 + 2 * 4), 1e-12);
+  EXPECT_FALSE(mesh::OrientOutward(box));
+  for (auto& f : box.faces) std::swap(f[0], f[1]);
+  EXPECT_NEAR(mesh::SignedVolume(box), -24, 1e-12);
+  EXPECT_TRUE(mesh::OrientOutward(box));
+  EXPECT_NEAR(mesh::SignedVolume(box), 24, 1e-12);
+  // A fine icosphere's volume approaches 4/3 π r³ from below.
+  const double v = mesh::SignedVolume(Icosphere(5, 2.0));
+  EXPECT_LT(v, 4.0 / 3.0 * M_PI * 8);
+  EXPECT_GT(v, 0.999 * 4.0 / 3.0 * M_PI * 8);
+}
+
+// On a box 1×2×3, every sample lies on a face with that face's outward normal, and the number of
+// samples per face follows its area (2, 3 and 6, each twice: fractions 1/11, 1.5/11, 3/11).
+TEST(SampleSurface, BoxFacesByAreaWithOutwardNormals) {
+  const Eigen::Vector3d hi(1, 2, 3);
+  TriangleMesh box = Box(Eigen::Vector3d::Zero(), hi);
+  for (bool inward : {false, true}) {
+    TriangleMesh m = box;
+    if (inward)
+      for (auto& f : m.faces) std::swap(f[1], f[2]);
+    constexpr std::size_t kN = 110000;
+    auto pts = mesh::SampleSurface(m, kN, 7);
+    ASSERT_TRUE(pts) << pts.error().message;
+    ASSERT_EQ(pts->positions.size(), kN);
+    std::array<std::size_t, 3> per_axis{};  // samples on the two faces normal to each axis
+    for (std::size_t s = 0; s < kN; ++s) {
+      const Eigen::Vector3d& p = pts->positions[s];
+      const Eigen::Vector3d& n = pts->normals[s];
+      ASSERT_NEAR(n.norm(), 1.0, 1e-12);
+      int axis = -1;
+      for (int a = 0; a < 3; ++a)
+        if (std::abs(std::abs(n[a]) - 1) < 1e-12) axis = a;
+      ASSERT_GE(axis, 0) << n.transpose();
+      // On the face the normal names: p[axis] = 0 with n = −e, or hi[axis] with n = +e.
+      EXPECT_NEAR(p[axis], n[axis] > 0 ? hi[axis] : 0.0, 1e-12) << p.transpose() << " / " << n.transpose();
+      EXPECT_TRUE((p.array() >= -1e-12).all() && (p.array() <= hi.array() + 1e-12).all());
+      ++per_axis[static_cast<std::size_t>(axis)];
+    }
+    // Areas of the face pairs normal to x, y, z: 2·(2·3), 2·(1·3), 2·(1·2) out of 22.
+    const double expect[3] = {12.0 / 22, 6.0 / 22, 4.0 / 22};
+    for (std::size_t a = 0; a < 3; ++a) {
+      const double sd = std::sqrt(expect[a] * (1 - expect[a]) / kN);
+      EXPECT_NEAR(static_cast<double>(per_axis[a]) / kN, expect[a], 5 * sd) << "axis " << a;
+    }
+  }
+}
+
+// Within one face, uniform by area: a square face fanned into four unequal triangles from an
+// off-centre point still gets samples uniformly over the square (quadrant counts ∝ area).
+TEST(SampleSurface, UniformInsideUnequalTriangles) {
+  TriangleMesh box = Box(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones());
+  // Replace the top face (z = 1, triangles 2 and 3) with a fan around (0.8, 0.3, 1).
+  box.faces.erase(box.faces.begin() + 2, box.faces.begin() + 4);
+  box.vertices.emplace_back(0.8, 0.3, 1.0);
+  const int c = 8;
+  box.faces.push_back({4, 5, c});
+  box.faces.push_back({5, 7, c});
+  box.faces.push_back({7, 6, c});
+  box.faces.push_back({6, 4, c});
+  ASSERT_TRUE(mesh::CheckClosedOriented(box, "fan"));
+  auto pts = mesh::SampleSurface(box, 120000, 3);
+  ASSERT_TRUE(pts) << pts.error().message;
+  std::size_t top = 0;
+  std::size_t lower_left = 0;  // x < 0.5 and y < 0.5 on the top face
+  for (std::size_t s = 0; s < pts->positions.size(); ++s) {
+    const Eigen::Vector3d& p = pts->positions[s];
+    if (pts->normals[s].z() > 0.5) {
+      ++top;
+      EXPECT_NEAR(p.z(), 1.0, 1e-12);
+      if (p.x() < 0.5 && p.y() < 0.5) ++lower_left;
+    }
+  }
+  const double n = static_cast<double>(top);
+  EXPECT_NEAR(n / 120000, 1.0 / 6, 5 * std::sqrt(1.0 / 6 * 5 / 6 / 120000));
+  EXPECT_NEAR(static_cast<double>(lower_left) / n, 0.25, 5 * std::sqrt(0.25 * 0.75 / n));
+}
+
+TEST(SampleSurface, DeterministicForASeed) {
+  auto m = mesh::ReadClosedMesh(DataFile("knot1.off"));
+  ASSERT_TRUE(m);
+  auto a = mesh::SampleSurface(*m, 1000, 1);
+  auto b = mesh::SampleSurface(*m, 1000, 1);
+  auto c = mesh::SampleSurface(*m, 1000, 2);
+  ASSERT_TRUE(a && b && c);
+  EXPECT_EQ(mesh::ToXyzText(*a), mesh::ToXyzText(*b));
+  EXPECT_NE(mesh::ToXyzText(*a), mesh::ToXyzText(*c));
+  // The first sample of seed 1 is pinned, so that a change of algorithm is a visible decision.
+  EXPECT_EQ(mesh::ToXyzText(*a).substr(0, mesh::ToXyzText(*a).find('\n')), std::string(kKnotSeed1First));
+}
+
+TEST(SampleSurface, RefusesZeroCount) {
+  EXPECT_FALSE(mesh::SampleSurface(Box(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones()), 0, 1));
+}
+
+class SampleCli : public TempDirTest {};
+
+TEST_F(SampleCli, WritesReadableDeterministicPointsOnTheSphere) {
+  const std::string out1 = Path("a.xyz");
+  const std::string out2 = Path("b.xyz");
+  const Outcome r1 = Palpa("sample " + DataFile("sphere.off").string() + " -n 2000 -o " + out1 + " --seed 5");
+  ASSERT_EQ(r1.code, 0) << r1.out;
+  const Outcome r2 = Palpa("sample " + DataFile("sphere.off").string() + " -n 2000 -o " + out2 + " --seed 5 -q");
+  ASSERT_EQ(r2.code, 0) << r2.out;
+  EXPECT_TRUE(r2.out.empty()) << r2.out;
+  EXPECT_EQ(ReadText(out1), ReadText(out2));
+  auto pts = field::ReadPoints(out1);
+  ASSERT_TRUE(pts) << pts.error().message;
+  ASSERT_EQ(pts->positions.size(), 2000u);
+  // sphere.off's vertices are on radius 0.5; its flat faces lie between the inscribed radius
+  // (> 0.45 for this 320-face mesh) and 0.5, and normals point outward.
+  for (std::size_t i = 0; i < pts->positions.size(); ++i) {
+    EXPECT_LE(pts->positions[i].norm(), 0.5 + 1e-6);
+    EXPECT_GT(pts->positions[i].norm(), 0.45);
+    EXPECT_GT(pts->normals[i].dot(pts->positions[i].normalized()), 0.95);
+  }
+}
+
+TEST_F(SampleCli, BadMeshExitsTwoAndWritesNothing) {
+  const std::string bad = Write("bad.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 one\n");
+  const Outcome r = Palpa("sample " + bad + " -n 10 -o " + Path("out.xyz"));
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("bad.off:6:"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(Path("out.xyz")));
+  const Outcome zero = Palpa("sample " + DataFile("sphere.off").string() + " -n 0 -o " + Path("out.xyz"));
+  EXPECT_EQ(zero.code, 2) << zero.out;
+  EXPECT_FALSE(fs::exists(Path("out.xyz")));
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().extension(), ".off") << e.path();
+}
+
+}  // namespace
+}  // namespace palpa::tools_test
