@@ -221,10 +221,11 @@ TEST_F(PalpadProcess, UnwritableOutputIsRefusedBeforeRunning) {
   EXPECT_EQ(r.out, "");
 }
 
-TEST_F(PalpadProcess, FalconIsNotBuiltYet) {
+TEST_F(PalpadProcess, NoFalconConnectedExitsThree) {
+  // No Falcon exists on the test machines (no USB stack at all): the libusb backend must say so.
   const Result r = Run({"--device", "falcon", "--field", Path("f.palpa"), "--out", Path("out.csv")});
   EXPECT_EQ(r.exit_code, 3) << r.err;
-  EXPECT_EQ(r.err, "palpad: the Falcon backend is not built yet (only --device sim)\n");
+  EXPECT_EQ(r.err, "palpad: no Novint Falcon (USB 0403:cb48) found\n");
   EXPECT_FALSE(Exists(Path("out.csv")));
 }
 
@@ -241,6 +242,71 @@ TEST_F(PalpadProcess, UsageErrors) {
   const Result help = Run({"--help"});
   EXPECT_EQ(help.exit_code, 0);
   EXPECT_NE(help.out.find("usage: palpad"), std::string::npos);
+}
+
+// ---------------------------------------------------------------- runtime (issue 9)
+
+TEST_F(PalpadProcess, EstopOnAMachineWithoutTheChipExitsThreeNamingTheChip) {
+  // Real here: the development and CI kernels have no GPIO chip at all.
+  struct stat st {};
+  if (stat("/dev/gpiochip0", &st) == 0) GTEST_SKIP() << "this machine has a GPIO chip";
+  const Result r = Run({"--device", "sim", "--field", Path("f.palpa"), "--trace", Path("t.csv"), "--out",
+                        Path("out.csv"), "--estop", "gpiochip0:17"});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_EQ(r.err,
+            "palpad: --estop gpiochip0:17: cannot open GPIO chip 'gpiochip0': No such file or directory (this system "
+            "has no such chip; `gpiodetect` lists the chips)\n");
+  EXPECT_FALSE(Exists(Path("out.csv")));
+  EXPECT_EQ(TempFilesLeft(), 0);
+}
+
+TEST_F(PalpadProcess, ARefusedRealtimeStepIsOneLoudWarningAndMarksEveryReport) {
+  // CPU 1023 exists on no machine palpa runs on: the kernel refuses the affinity.
+  const Result r =
+      Run({"--device", "sim", "--field", Path("f.palpa"), "--trace", Path("t.csv"), "--out", Path("out.csv"), "--rate",
+           "2000", "--cpu", "1023", "--summary-json", Path("s.json"), "--status", Path("status.json")});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string warning = "palpad: WARNING: NOT REAL-TIME: CPU affinity (CPU 1023) refused: Invalid argument";
+  EXPECT_NE(r.err.find(warning), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find(warning), r.err.rfind(warning)) << "one warning, not one per tick";
+  EXPECT_NE(r.out.find("real-time: NO (refused: CPU affinity (CPU 1023): Invalid argument"), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("wake-up latency (us): p50 "), std::string::npos) << r.out;
+  const std::string json = ReadAll(Path("s.json"));
+  EXPECT_NE(json.find("\"realtime\": false"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"rt_refused\": \"CPU affinity (CPU 1023): Invalid argument"), std::string::npos) << json;
+  const std::string status = ReadAll(Path("status.json"));
+  EXPECT_NE(status.find("\"state\": \"ended\""), std::string::npos) << status;
+  EXPECT_NE(status.find("\"realtime\": false"), std::string::npos) << status;
+  EXPECT_NE(status.find("\"samples\": 401"), std::string::npos) << status;
+}
+
+TEST_F(PalpadProcess, ConfigFileRunsAndTheCommandLineWins) {
+  WriteAll(Path("p.toml"), "device = \"sim\"\nfield = \"" + Path("f.palpa") + "\"\ntrace = \"" + Path("t.csv") +
+                               "\"\nout = \"" + Path("wrong.csv") + "\"\nfast = true\n");
+  const Result r = Run({"--config", Path("p.toml"), "--out", Path("out.csv")});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("ticks: 201\n"), std::string::npos) << r.out;
+  EXPECT_TRUE(Exists(Path("out.csv")));
+  EXPECT_FALSE(Exists(Path("wrong.csv")));
+
+  const Result check = Run({"--config", Path("p.toml"), "--check-config"});
+  EXPECT_EQ(check.exit_code, 0) << check.err;
+  EXPECT_NE(check.out.find("fast = true\n"), std::string::npos) << check.out;
+  EXPECT_FALSE(Exists(Path("wrong.csv"))) << "--check-config runs nothing";
+
+  WriteAll(Path("bad.toml"), "device = \"sim\"\n\nrate = \"1 kHz\"\n");
+  const Result bad = Run({"--config", Path("bad.toml")});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("palpad: " + Path("bad.toml") + ":3: key 'rate': must be a number"), std::string::npos)
+      << bad.err;
+}
+
+TEST_F(PalpadProcess, OutDevNullKeepsNoCsv) {
+  const Result r =
+      Run({"--device", "sim", "--field", Path("f.palpa"), "--trace", Path("t.csv"), "--out", "/dev/null", "--fast"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("ticks: 201\n"), std::string::npos) << r.out;
 }
 
 }  // namespace

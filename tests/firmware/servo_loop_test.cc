@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -30,7 +32,10 @@ proxy::ProxyParams Params(double voxel_m, double max_force_n = 8) {
   c.k_n_per_m = kK;
   c.max_force_n = max_force_n;
   auto p = proxy::MakeProxyParams(c, voxel_m);
-  EXPECT_TRUE(p.has_value());
+  if (!p) {  // without parameters nothing below is meaningful: stop rather than read an empty expected
+    ADD_FAILURE() << "MakeProxyParams: " << p.error();
+    std::abort();
+  }
   return *p;
 }
 
@@ -178,8 +183,10 @@ TEST(ServoLoop, TickTimingOnTheSphere) {
   ASSERT_EQ(replay.loop.Run(true, 1000), RunEnd::kEnded);
   const ServoSummary s = Summarize(replay.loop, true, 1000);
   std::vector<std::int64_t> contact_ns;
-  for (std::size_t i = 0; i < replay.loop.rows().size(); ++i) {
-    if (replay.loop.rows()[i].contact) contact_ns.push_back(replay.loop.tick_ns()[i]);
+  const std::span<const LogRow> rows = replay.loop.rows();  // snapshots of the ring: take them once
+  const std::span<const std::int64_t> tick_ns = replay.loop.tick_ns();
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (rows[i].contact) contact_ns.push_back(tick_ns[i]);
   }
   std::printf(
       "[ measured ] %llu ticks (%llu in contact): median tick %lld ns, p99 %lld ns; contact ticks: median %lld ns, p99 "

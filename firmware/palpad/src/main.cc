@@ -1,31 +1,43 @@
-// palpad: the controller. Start-up (non-RT) verifies every input before the loop runs; the loop
-// runs on this thread; the CSV and summary are written after it stops.
+// palpad: the controller. Start-up (non-RT) verifies every input and opens every line and device
+// before the loop runs; then the real-time set-up, and the loop runs on this thread while a
+// drain thread streams its telemetry to --out and --status, and a watchdog thread watches it.
 
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
+#include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "falcon_session.h"
 #include "palpa/blob/blob.h"
 #include "palpa/device_sim/sim_device.h"
+#include "palpa/gpio_linux/gpiod_lines.h"
 #include "palpa/palpad/options.h"
 #include "palpa/proxy/proxy.h"
-#include "palpa/servo/realtime.h"
+#include "palpa/rt/realtime.h"
 #include "palpa/servo/report.h"
 #include "palpa/servo/servo_loop.h"
+#include "palpa/servo/telemetry_drain.h"
+#include "palpa/servo/watchdog.h"
 #include "palpa/trace/trace.h"
+#include "recorder.h"
 
 namespace {
 
 using palpa::palpad::kExitBadInput;
-using palpa::palpad::kExitNotBuilt;
+using palpa::palpad::kExitNoDevice;
 using palpa::palpad::kExitOk;
 using palpa::palpad::kExitRunFailed;
 
-constexpr int kServoFifoPriority = 80;
+// Telemetry ring: 16384 samples (~2 MB) = 16 s at 1 kHz, 1.6 s at 10 kHz of backlog before a
+// sample is dropped; the drain empties it every millisecond.
+constexpr std::size_t kTelemetryCapacity = 16384;
 
 std::atomic<bool> g_stop{false};
 
@@ -45,17 +57,27 @@ int Fail(int code, const std::string& message) {
   return code;
 }
 
-int Run(const palpa::palpad::Options& o) {
-  if (o.device == "falcon") return Fail(kExitNotBuilt, "the Falcon backend is not built yet (only --device sim)");
+// Watchdog trip, on the watchdog thread: one loud line (the loop latches the fault itself).
+void OnWatchdogTrip(void*, std::int64_t stalled_ns) {
+  std::fprintf(stderr,
+               "palpad: WATCHDOG: a servo tick has not completed for %.1f ms (device layer stalled): fault "
+               "latched; the device's own timeout and the stopped tick line zero the force\n",
+               static_cast<double>(stalled_ns) / 1e6);
+}
 
+int Run(const palpa::palpad::Options& o) {
   // Field: read, then verify every byte before anything uses it. `blob` outlives the loop.
   auto blob = palpa::blob::ReadFile(o.field_path.c_str());
   if (!blob) return Fail(kExitBadInput, o.field_path + ": " + blob.error().what());
   const auto field = palpa::blob::Verify(*blob);
   if (!field) return Fail(kExitBadInput, o.field_path + ": " + field.error().what());
 
-  auto samples = palpa::trace::ReadTrace(o.trace_path);
-  if (!samples) return Fail(kExitBadInput, samples.error().message);
+  std::vector<palpa::trace::TraceSample> samples;  // the real Falcon is moved by hand: no trace
+  if (o.device != "falcon") {
+    auto read = palpa::trace::ReadTrace(o.trace_path);
+    if (!read) return Fail(kExitBadInput, read.error().message);
+    samples = std::move(*read);
+  }
 
   palpa::proxy::ProxyConfig config;
   config.k_n_per_m = o.k_n_per_m;
@@ -64,30 +86,156 @@ int Run(const palpa::palpad::Options& o) {
   if (!params) return Fail(kExitBadInput, std::string("parameters: ") + params.error());
 
   // Open the output now so that an unwritable path fails before the run, not after it.
-  auto out = palpa::servo::AtomicFile::Create(o.out_path);
-  if (!out) return Fail(kExitBadInput, out.error());
+  // /dev/null (a service running for hours): no CSV at all.
+  const bool keep_csv = o.out_path != "/dev/null";
+  std::optional<palpa::servo::AtomicFile> out;
+  if (keep_csv) {
+    auto file = palpa::servo::AtomicFile::Create(o.out_path);
+    if (!file) return Fail(kExitBadInput, file.error());
+    out.emplace(std::move(*file));
+  }
 
-  palpa::device_sim::SimDevice device(std::move(*samples), o.rate_hz);
-  palpa::servo::ServoLoop loop(*field, *params, device, device.TickCount(), g_stop);
+  // GPIO lines before the device: a missing chip is reported before anything moves.
+  std::unique_ptr<palpa::gpio_linux::GpiodInput> estop;
+  std::unique_ptr<palpa::gpio_linux::GpiodOutput> tick_line;
+  if (o.estop_line) {
+    auto line = palpa::gpio_linux::GpiodInput::Open("--estop", *o.estop_line, "palpad-estop");
+    if (!line) return Fail(kExitNoDevice, line.error());
+    estop = std::move(*line);
+  }
+  if (o.tick_line) {
+    auto line = palpa::gpio_linux::GpiodOutput::Open("--tick-gpio", *o.tick_line, "palpad-tick", false);
+    if (!line) return Fail(kExitNoDevice, line.error());
+    tick_line = std::move(*line);
+  }
+
+  std::optional<palpa::device_sim::SimDevice> sim;
+  std::unique_ptr<palpa::palpad::FalconSession> falcon;
+  palpa::device::HapticDevice* device = nullptr;
+  if (o.device == "sim") {
+    sim.emplace(std::move(samples), o.rate_hz);
+    device = &*sim;
+  } else {
+    // virtual-falcon replays as many ticks as a sim replay of the same trace would.
+    const std::size_t ticks =
+        o.device == "virtual-falcon" ? palpa::device_sim::SimDevice(samples, o.rate_hz).TickCount() : 0;
+    auto session = palpa::palpad::FalconSession::Open(o, std::move(samples), ticks);
+    if (!session) return Fail(session.error().exit_code, session.error().message);
+    falcon = std::move(*session);
+    device = &falcon->device();
+  }
+
+  palpa::servo::ServoConfig sc;
+  sc.telemetry_capacity = kTelemetryCapacity;
+  sc.wait_when_full = o.fast;  // lockstep replay: complete, deterministic output; paced: drop, never wait
+  sc.overrun_fault_limit = static_cast<std::uint32_t>(o.overrun_limit);
+  sc.estop = estop.get();
+  sc.estop_active_high = o.estop_active_high;
+  sc.estop_release_ticks = static_cast<std::uint32_t>(o.estop_debounce);
+  sc.ramp_ticks = static_cast<std::uint32_t>(std::llround(o.ramp_ms * 1e-3 * o.rate_hz));
+  sc.tick_line = tick_line.get();
+  palpa::servo::ServoLoop loop(*field, *params, *device, sc, g_stop);
 
   InstallStopHandlers();
-  if (!o.fast) {
-    const palpa::servo::RealtimeReport rt = palpa::servo::PrepareRealtimeThread(kServoFifoPriority);
-    if (!rt.ok()) std::fprintf(stderr, "palpad: warning: running paced but not RT:\n%s", rt.problems.c_str());
+  if (falcon) {
+    if (auto homed = falcon->Home(g_stop, o.home_timeout_s); !homed) {
+      (void)falcon->Finish();
+      return Fail(homed.error().exit_code, homed.error().message);
+    }
   }
+
+  // Real-time set-up (paced runs): every refused step is one loud warning and marks the run.
+  palpa::rt::RtSetup rt;
+  if (!o.fast) {
+    const auto buffers = loop.buffers();
+    palpa::rt::RtRequest request;
+    request.cpu = static_cast<int>(o.cpu);
+    request.priority = static_cast<int>(o.priority);
+    request.buffers = buffers;
+    rt = palpa::rt::PrepareRealtimeThread(request);
+    std::fputs(rt.Warnings("palpad").c_str(), stderr);
+  }
+
+  // --record / --record-timing: a sink on the drain thread (the loop only fills the ring).
+  std::unique_ptr<palpa::palpad::Recorder> recorder;
+  if (!o.record_path.empty() || !o.record_timing_path.empty()) {
+    auto opened = palpa::palpad::Recorder::Open(
+        o.record_path, o.record_timing_path,
+        "palpad --record: the HIP as read, device " + o.device + ", field " + o.field_path + ", " +
+            (o.fast ? std::string("fast") : "paced at " + std::to_string(o.rate_hz) + " Hz"));
+    if (!opened) return Fail(kExitBadInput, opened.error());
+    recorder = std::move(*opened);
+  }
+
+  palpa::servo::DrainConfig dc;
+  dc.sink = recorder.get();
+  dc.csv = out ? out->file() : nullptr;
+  dc.status_path = o.status_path;
+  dc.rate_hz = o.rate_hz;
+  dc.fast = o.fast;
+  dc.realtime_requested = !o.fast;
+  dc.realtime = !o.fast && rt.realtime();
+  dc.rt_refused = rt.Refused();
+  dc.avoid_cpu = static_cast<int>(o.cpu);
+  palpa::servo::TelemetryDrain drain(loop.telemetry(), dc);
+  if (!drain.WriteStatus("starting")) return Fail(kExitBadInput, "cannot write the status file " + o.status_path);
+  if (const int err = drain.Start(); err != 0)
+    return Fail(kExitRunFailed, std::string("cannot start the telemetry thread: ") + std::strerror(err));
+  palpa::servo::Watchdog watchdog(
+      loop, {static_cast<std::int64_t>(o.watchdog_ms * 1e6), &OnWatchdogTrip, nullptr, static_cast<int>(o.cpu)});
+  if (!o.fast && o.watchdog_ms > 0) {
+    if (const int err = watchdog.Start(); err != 0)
+      return Fail(kExitRunFailed, std::string("cannot start the watchdog thread: ") + std::strerror(err));
+  }
+
   const palpa::servo::RunEnd end = loop.Run(o.fast, o.rate_hz);
 
   // After the run: non-RT again.
-  int code = kExitOk;
-  if (end == palpa::servo::RunEnd::kStopped) std::fprintf(stderr, "palpad: stopped by signal\n");
-  if (end == palpa::servo::RunEnd::kDeviceError) {
-    std::fprintf(stderr, "palpad: device error: zero force written, run stopped\n");
-    code = kExitRunFailed;
+  watchdog.Stop();
+  drain.Stop(palpa::servo::RunEndName(end));
+  if (recorder) {
+    if (auto committed = recorder->Commit(loop.counters().dropped_rows); !committed)
+      return Fail(kExitRunFailed, "--record: " + committed.error());
+    std::fputs(recorder->Report().c_str(), stderr);
   }
-  if (!palpa::servo::WriteCsv(out->file(), loop.rows())) return Fail(kExitRunFailed, "cannot write " + o.out_path);
-  if (auto committed = out->Commit(); !committed) return Fail(kExitRunFailed, committed.error());
+  int code = kExitOk;
+  switch (end) {
+    case palpa::servo::RunEnd::kStopped:
+      std::fprintf(stderr, "palpad: stopped by signal\n");
+      break;
+    case palpa::servo::RunEnd::kDeviceError:
+      std::fprintf(stderr, "palpad: device error: zero force written, run stopped\n");
+      code = kExitRunFailed;
+      break;
+    case palpa::servo::RunEnd::kOverrunFault:
+      std::fprintf(stderr, "palpad: FAULT: %u consecutive overruns at %g Hz: zero force written, run stopped\n",
+                   sc.overrun_fault_limit, o.rate_hz);
+      code = kExitRunFailed;
+      break;
+    case palpa::servo::RunEnd::kWatchdogFault:
+      std::fprintf(stderr, "palpad: FAULT: watchdog: a tick did not complete within %g ms: zero force written\n",
+                   o.watchdog_ms);
+      code = kExitRunFailed;
+      break;
+    case palpa::servo::RunEnd::kEnded:
+    case palpa::servo::RunEnd::kInvalidRate:
+      break;
+  }
+  if (falcon && falcon->Finish() != kExitOk) code = kExitRunFailed;
+  if (loop.counters().dropped_rows != 0)
+    std::fprintf(stderr, "palpad: warning: %llu telemetry samples dropped (ring full): %s misses them\n",
+                 static_cast<unsigned long long>(loop.counters().dropped_rows), o.out_path.c_str());
+  if (drain.csv_failed()) return Fail(kExitRunFailed, "cannot write " + o.out_path);
+  if (out) {
+    if (auto committed = out->Commit(); !committed) return Fail(kExitRunFailed, committed.error());
+  }
 
-  const palpa::servo::ServoSummary summary = palpa::servo::Summarize(loop, o.fast, o.rate_hz);
+  palpa::servo::ServoSummary summary = palpa::servo::Summarize(loop, o.fast, o.rate_hz);
+  summary.end = palpa::servo::RunEndName(end);
+  summary.watchdog_trips = watchdog.trips();
+  summary.realtime_requested = !o.fast;
+  summary.realtime = !o.fast && rt.realtime();
+  summary.rt_refused = rt.Refused();
   std::fputs(palpa::servo::SummaryText(summary).c_str(), stdout);
   if (!o.summary_json_path.empty()) {
     auto json = palpa::servo::AtomicFile::Create(o.summary_json_path);
@@ -95,6 +243,13 @@ int Run(const palpa::palpad::Options& o) {
     if (std::fputs(palpa::servo::SummaryJson(summary).c_str(), json->file()) < 0)
       return Fail(kExitRunFailed, "cannot write " + o.summary_json_path);
     if (auto committed = json->Commit(); !committed) return Fail(kExitRunFailed, committed.error());
+  }
+  if (!o.latency_histogram_path.empty()) {
+    auto hist = palpa::servo::AtomicFile::Create(o.latency_histogram_path);
+    if (!hist) return Fail(kExitRunFailed, hist.error());
+    if (std::fputs(palpa::servo::LatencyHistogramText(loop.wake_latency(), summary).c_str(), hist->file()) < 0)
+      return Fail(kExitRunFailed, "cannot write " + o.latency_histogram_path);
+    if (auto committed = hist->Commit(); !committed) return Fail(kExitRunFailed, committed.error());
   }
   return code;
 }
@@ -110,6 +265,10 @@ int main(int argc, char** argv) {
   }
   if (options->help) {
     std::fputs(palpa::palpad::Usage(), stdout);
+    return kExitOk;
+  }
+  if (options->check_config) {
+    std::fputs(palpa::palpad::OptionsToml(*options).c_str(), stdout);
     return kExitOk;
   }
   return Run(*options);

@@ -2,12 +2,17 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <string_view>
+#include <vector>
+
+#include "palpa/palpad/config.h"
 
 namespace palpa::palpad {
 namespace {
 
-// Each option names the Options member it sets: adding an option is one row.
+// Each option names the Options member it sets: adding an option is one row, and it is then
+// accepted on the command line and in the config file alike.
 struct OptionSpec {
   std::string_view name;
   std::string Options::*text = nullptr;  // string option
@@ -25,7 +30,27 @@ const OptionSpec kSpecs[] = {
     {"--rate", nullptr, &Options::rate_hz},
     {"--k", nullptr, &Options::k_n_per_m},
     {"--max-force", nullptr, &Options::max_force_n},
+    {"--firmware", &Options::firmware_path},
+    {"--usb-index", nullptr, &Options::usb_index},
+    {"--fault", &Options::faults},
+    {"--home-timeout", nullptr, &Options::home_timeout_s},
+    {"--config", &Options::config_path},
+    {"--status", &Options::status_path},
+    {"--latency-histogram", &Options::latency_histogram_path},
+    {"--record", &Options::record_path},
+    {"--record-timing", &Options::record_timing_path},
+    {"--cpu", nullptr, &Options::cpu},
+    {"--priority", nullptr, &Options::priority},
+    {"--overrun-limit", nullptr, &Options::overrun_limit},
+    {"--watchdog-ms", nullptr, &Options::watchdog_ms},
+    {"--estop", &Options::estop},
+    {"--estop-active", &Options::estop_active},
+    {"--estop-debounce", nullptr, &Options::estop_debounce},
+    {"--ramp-ms", nullptr, &Options::ramp_ms},
+    {"--tick-gpio", &Options::tick_gpio},
+    {"--check-config", nullptr, nullptr, &Options::check_config},
 };
+constexpr std::size_t kSpecCount = std::size(kSpecs);
 
 std::expected<double, std::string> ParseNumber(std::string_view name, std::string_view text) {
   double v = 0;
@@ -36,25 +61,126 @@ std::expected<double, std::string> ParseNumber(std::string_view name, std::strin
   return v;
 }
 
+std::size_t FindSpec(std::string_view name) {
+  std::size_t spec = 0;
+  while (spec < kSpecCount && kSpecs[spec].name != name) ++spec;
+  return spec;
+}
+
+bool WholeIn(double v, double lo, double hi) { return v >= lo && v <= hi && v == std::floor(v); }
+
+// Applies the config file's entries to `o`, marking them in `from_config`. Errors name the file,
+// the line and the key.
+std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o, bool (&from_config)[kSpecCount]) {
+  auto entries = ReadConfigFile(path);
+  if (!entries) return std::unexpected(std::move(entries.error()));
+  for (const ConfigEntry& e : *entries) {
+    const std::string where = path + ":" + std::to_string(e.line) + ": key '" + e.key + "'";
+    const std::size_t spec = FindSpec("--" + e.key);
+    if (spec == kSpecCount || e.key == "config")
+      return std::unexpected(path + ":" + std::to_string(e.line) + ": unknown key '" + e.key +
+                             "' (keys are palpad's options without the leading --)");
+    const OptionSpec& opt = kSpecs[spec];
+    from_config[spec] = true;
+    if (opt.flag != nullptr) {
+      if (e.kind != ConfigEntry::Kind::kBoolean) return std::unexpected(where + ": must be true or false");
+      o.*opt.flag = e.boolean;
+    } else if (opt.text != nullptr) {
+      if (e.kind != ConfigEntry::Kind::kString) return std::unexpected(where + ": must be a string (in quotes)");
+      if (e.text.empty()) return std::unexpected(where + ": must not be empty");
+      o.*opt.text = e.text;
+    } else {
+      if (e.kind != ConfigEntry::Kind::kNumber) return std::unexpected(where + ": must be a number");
+      if (!std::isfinite(e.number)) return std::unexpected(where + ": must be a finite number");
+      o.*opt.number = e.number;
+    }
+  }
+  return {};
+}
+
+// Range checks of the runtime options; the messages name the option.
+std::expected<void, std::string> CheckRuntime(Options& o, const bool (&given)[kSpecCount]) {
+  const auto was_given = [&](std::string_view option) { return given[FindSpec(option)]; };
+  if (!WholeIn(o.cpu, -1, 1023)) return std::unexpected("--cpu must be a whole number in 0..1023 (or -1: not pinned)");
+  if (!WholeIn(o.priority, 1, 99)) return std::unexpected("--priority must be a whole number in 1..99");
+  if (!WholeIn(o.overrun_limit, 0, 1e6))
+    return std::unexpected("--overrun-limit must be a whole number in 0..1000000 (0: never)");
+  if (!(o.watchdog_ms >= 0 && o.watchdog_ms <= 10000))
+    return std::unexpected("--watchdog-ms must be in 0..10000 (0: off)");
+  if (!WholeIn(o.estop_debounce, 1, 100000))
+    return std::unexpected("--estop-debounce must be a whole number of ticks in 1..100000");
+  if (!(o.ramp_ms >= 0 && o.ramp_ms <= 10000)) return std::unexpected("--ramp-ms must be in 0..10000");
+  auto active = gpio::ParseActiveLevel("--estop-active", o.estop_active);
+  if (!active) return std::unexpected(std::move(active.error()));
+  o.estop_active_high = *active;
+  if (!o.estop.empty()) {
+    auto line = gpio::ParseLineSpec("--estop", o.estop);
+    if (!line) return std::unexpected(std::move(line.error()));
+    o.estop_line = std::move(*line);
+  } else {
+    for (const char* option : {"--estop-active", "--estop-debounce", "--ramp-ms"})
+      if (was_given(option)) return std::unexpected(std::string(option) + " needs --estop");
+  }
+  if (!o.tick_gpio.empty()) {
+    auto line = gpio::ParseLineSpec("--tick-gpio", o.tick_gpio);
+    if (!line) return std::unexpected(std::move(line.error()));
+    o.tick_line = std::move(*line);
+  }
+  if (o.estop_line && o.tick_line && o.estop_line->chip == o.tick_line->chip && o.estop_line->line == o.tick_line->line)
+    return std::unexpected("--estop and --tick-gpio name the same line");
+  return {};
+}
+
 }  // namespace
 
 const char* Usage() {
   return "usage: palpad --device sim --field F.palpa --trace T.csv --out OUT.csv [options]\n"
+         "       palpad --device falcon [--firmware FW.bin] [--usb-index N] --field F.palpa --out OUT.csv\n"
+         "       palpad --device virtual-falcon --trace T.csv [--firmware FW.bin] [--fault LIST] --field F.palpa "
+         "--out OUT.csv\n"
+         "       palpad --config /etc/palpa/palpad.toml [options]\n"
          "\n"
          "Runs the haptic servo loop (paper eq. 9 proxy, eq. 10 force) on a verified field blob.\n"
          "\n"
-         "  --device sim|falcon   HIP source (default sim): sim replays --trace (falcon: not built yet)\n"
+         "  --config PATH         TOML file of options (keys without the --); the command line wins\n"
+         "  --check-config        check the options, print them as TOML and exit\n"
+         "  --device DEV          HIP source (default sim): sim replays --trace; falcon drives a Novint\n"
+         "                        Falcon over USB (homing first, then forces until SIGINT/SIGTERM);\n"
+         "                        virtual-falcon simulates one, its hand following --trace\n"
+         "  --firmware PATH       Novint firmware file, uploaded if none runs (palpa does not ship it)\n"
+         "  --usb-index N         falcon: the N-th attached Falcon (default 0)\n"
+         "  --fault LIST          virtual-falcon: inject faults, e.g. split@0,unplug@500 (docs/falcon.md)\n"
+         "  --home-timeout S      falcon devices: homing time limit in s (default 60)\n"
          "  --field PATH          signed distance field, blob v1 (palpa build)\n"
          "  --trace PATH          HIP trace CSV t_s,x_m,y_m,z_m (required for sim)\n"
-         "  --out PATH            per-tick CSV, written atomically at the end\n"
+         "  --out PATH            per-tick CSV, written as the run goes, renamed into place at the end\n"
+         "                        (/dev/null: none)\n"
          "  --fast                tick back to back (deterministic replay) instead of pacing\n"
          "  --rate HZ             tick rate, 1..10000 (default 1000); sim replays at t = tick/rate\n"
          "  --k N_PER_M           stiffness k (default 800)\n"
          "  --max-force N         force clamp (default 8)\n"
          "  --summary-json PATH   also write the summary as JSON\n"
+         "  --status PATH         live status JSON, rewritten once a second (e.g. /run/palpa/status.json)\n"
+         "  --latency-histogram PATH  after the run: the wake-up latency histogram, 1 us bins, in\n"
+         "                        cyclictest's -h layout (compare with cyclictest --histfile)\n"
+         "  --record PATH         record the HIP as read each tick as a trace (docs/trace-format.md):\n"
+         "                        binary v2 if PATH ends in .ptb, else text v2; written by the\n"
+         "                        telemetry thread, never by the loop; dropped samples are reported\n"
+         "  --record-timing PATH  per-tick CSV tick,t_s,wake_ns,compute_ns,total_ns,flags (same way)\n"
+         "\n"
+         "Real time (paced runs; docs/runtime.md):\n"
+         "  --cpu N               pin the servo thread to CPU N (default: not pinned)\n"
+         "  --priority P          SCHED_FIFO priority 1..99 (default 80)\n"
+         "  --overrun-limit N     N consecutive overruns: zero force, fault, exit 1 (default 10; 0 never)\n"
+         "  --watchdog-ms MS      a tick running longer latches a fault (default 50; 0 off)\n"
+         "  --estop CHIP:LINE     e-stop input (libgpiod), e.g. gpiochip0:17: zero force while asserted\n"
+         "  --estop-active LEVEL  high (default) or low: the level that asserts the e-stop\n"
+         "  --estop-debounce N    released reads (ticks) before a release counts (default 5)\n"
+         "  --ramp-ms MS          after a release the force ramps in over MS (default 500)\n"
+         "  --tick-gpio CHIP:LINE output toggled every tick (measure period and jitter with a scope)\n"
          "  --help                this text\n"
          "\n"
-         "exit: 0 ok, 1 device error or output not written, 2 bad input, 3 backend not built\n";
+         "exit: 0 ok, 1 device error, fault or output not written, 2 bad input, 3 device not available\n";
 }
 
 std::expected<Options, std::string> ParseArgs(std::span<const char* const> args) {
@@ -67,16 +193,34 @@ std::expected<Options, std::string> ParseArgs(std::span<const char* const> args)
     }
   }
 
+  // Pass 1: the config file, if any, sets the starting values.
   Options o;
-  bool seen[std::size(kSpecs)] = {};
+  bool from_config[kSpecCount] = {};
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string_view arg(args[i]);
+    std::string_view path;
+    if (arg.starts_with("--config=")) {
+      path = arg.substr(9);
+    } else if (arg == "--config" && i + 1 < args.size()) {
+      path = args[i + 1];
+    } else {
+      continue;
+    }
+    if (path.empty()) return std::unexpected("--config needs a non-empty value");
+    if (auto applied = ApplyConfig(std::string(path), o, from_config); !applied)
+      return std::unexpected(std::move(applied.error()));
+    break;  // a second --config is reported as "given twice" below
+  }
+
+  // Pass 2: the command line overrides.
+  bool seen[kSpecCount] = {};
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string_view arg(args[i]);
     if (!arg.starts_with("--")) return std::unexpected("unexpected argument '" + std::string(arg) + "'");
     const auto eq = arg.find('=');
     const std::string_view name = arg.substr(0, eq);
-    std::size_t spec = 0;
-    while (spec < std::size(kSpecs) && kSpecs[spec].name != name) ++spec;
-    if (spec == std::size(kSpecs)) return std::unexpected("unknown option '" + std::string(name) + "'");
+    const std::size_t spec = FindSpec(name);
+    if (spec == kSpecCount) return std::unexpected("unknown option '" + std::string(name) + "'");
     if (seen[spec]) return std::unexpected(std::string(name) + " given twice");
     seen[spec] = true;
 
@@ -103,15 +247,59 @@ std::expected<Options, std::string> ParseArgs(std::span<const char* const> args)
     if (!number) return std::unexpected(std::move(number.error()));
     o.*opt.number = *number;
   }
+  bool given[kSpecCount] = {};
+  for (std::size_t i = 0; i < kSpecCount; ++i) given[i] = seen[i] || from_config[i];
+  const auto was_given = [&](std::string_view option) { return given[FindSpec(option)]; };
 
   if (o.device.empty()) o.device = "sim";  // the simulated device is the default
-  if (o.device != "sim" && o.device != "falcon")
-    return std::unexpected("--device: unknown device '" + o.device + "' (sim or falcon)");
+  if (o.device != "sim" && o.device != "falcon" && o.device != "virtual-falcon")
+    return std::unexpected("--device: unknown device '" + o.device + "' (sim, falcon or virtual-falcon)");
+  if (o.device == "virtual-falcon" && o.trace_path.empty())
+    return std::unexpected("--trace is required with --device virtual-falcon");
+  if (o.device == "falcon" && !o.trace_path.empty())
+    return std::unexpected("--trace: the real Falcon is moved by hand (use --device virtual-falcon to replay)");
+  if (o.device == "sim" && !o.firmware_path.empty()) return std::unexpected("--firmware needs a Falcon device");
+  if (o.device != "falcon" && was_given("--usb-index")) return std::unexpected("--usb-index needs --device falcon");
+  if (o.device != "virtual-falcon" && !o.faults.empty())
+    return std::unexpected("--fault needs --device virtual-falcon");
+  if (!(o.usb_index >= 0 && o.usb_index <= 127 && o.usb_index == std::floor(o.usb_index)))
+    return std::unexpected("--usb-index must be a whole number in 0..127");
+  if (!(o.home_timeout_s >= 1 && o.home_timeout_s <= 3600))
+    return std::unexpected("--home-timeout must be in 1..3600 s");
   if (o.field_path.empty()) return std::unexpected("--field is required");
   if (o.out_path.empty()) return std::unexpected("--out is required");
   if (o.device == "sim" && o.trace_path.empty()) return std::unexpected("--trace is required with --device sim");
   if (!(o.rate_hz >= 1 && o.rate_hz <= 10000)) return std::unexpected("--rate must be in 1..10000 Hz");
+  if (auto runtime = CheckRuntime(o, given); !runtime) return std::unexpected(std::move(runtime.error()));
   return o;
+}
+
+std::string OptionsToml(const Options& o) {
+  // Only what differs from the defaults (and the device): the output is itself a valid config.
+  const Options defaults;
+  std::string out = "# palpad options (palpad --check-config)\n";
+  for (const OptionSpec& opt : kSpecs) {
+    const std::string key(opt.name.substr(2));
+    if (key == "config" || key == "check-config") continue;
+    if (opt.flag != nullptr) {
+      if (o.*opt.flag) out += key + " = true\n";
+    } else if (opt.text != nullptr) {
+      const std::string& v = o.*opt.text;
+      if (v.empty() || (v == defaults.*opt.text && key != "device")) continue;
+      std::string quoted = "\"";
+      for (const char ch : v) {
+        if (ch == '"' || ch == '\\') quoted += '\\';
+        quoted += ch;
+      }
+      out += key + " = " + quoted + "\"\n";
+    } else {
+      if (o.*opt.number == defaults.*opt.number) continue;
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.17g", o.*opt.number);
+      out += key + " = " + buf + "\n";
+    }
+  }
+  return out;
 }
 
 }  // namespace palpa::palpad

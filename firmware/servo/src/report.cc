@@ -38,14 +38,20 @@ std::string DirectoryOf(const std::string& path) {
 
 }  // namespace
 
+bool WriteCsvHeader(std::FILE* out) {
+  return std::fprintf(out, "%.*s\n", static_cast<int>(kCsvHeader.size()), kCsvHeader.data()) >= 0;
+}
+
+bool WriteCsvRow(std::FILE* out, const LogRow& r) {
+  return std::fprintf(out, "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.9g,%.9g,%.9g,%d\n", r.t_s, r.hip_m[0],
+                      r.hip_m[1], r.hip_m[2], r.proxy_m[0], r.proxy_m[1], r.proxy_m[2], r.force_n[0], r.force_n[1],
+                      r.force_n[2], r.contact ? 1 : 0) >= 0;
+}
+
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows) {
-  if (std::fprintf(out, "%.*s\n", static_cast<int>(kCsvHeader.size()), kCsvHeader.data()) < 0) return false;
-  for (const LogRow& r : rows) {
-    const int n = std::fprintf(out, "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.9g,%.9g,%.9g,%d\n", r.t_s, r.hip_m[0],
-                               r.hip_m[1], r.hip_m[2], r.proxy_m[0], r.proxy_m[1], r.proxy_m[2], r.force_n[0],
-                               r.force_n[1], r.force_n[2], r.contact ? 1 : 0);
-    if (n < 0) return false;
-  }
+  if (!WriteCsvHeader(out)) return false;
+  for (const LogRow& r : rows)
+    if (!WriteCsvRow(out, r)) return false;
   return std::ferror(out) == 0;
 }
 
@@ -134,22 +140,85 @@ ServoSummary Summarize(const ServoLoop& loop, bool fast, double rate_hz) {
   s.contact_ticks = c.contact_ticks;
   s.max_force_n = c.max_force_n;
   s.max_penetration_mm = c.max_penetration_m * 1e3;
-  const std::span<const std::int64_t> ns = loop.tick_ns();
-  if (!ns.empty()) {
-    // Upper median: element n/2 of the sorted durations.
-    std::vector<std::int64_t> copy(ns.begin(), ns.end());
-    const auto mid = copy.begin() + static_cast<std::ptrdiff_t>(copy.size() / 2);
-    std::nth_element(copy.begin(), mid, copy.end());
-    s.median_tick_ns = *mid;
-  }
-  s.p99_tick_ns = PercentileNs(ns, 0.99);
+  s.wake = FiguresOf(loop.wake_latency());
+  s.compute = FiguresOf(loop.compute_time());
+  s.median_tick_ns = s.compute.p50_ns;
+  s.p99_tick_ns = s.compute.p99_ns;
   s.force_clamps = c.force_clamps;
   s.device_errors = c.device_errors;
   s.overruns = c.overruns;
+  s.max_consecutive_overruns = c.max_consecutive_overruns;
   s.dropped_rows = c.dropped_rows;
+  s.estop_events = c.estop_events;
+  s.estop_ticks = c.estop_ticks;
+  s.gpio_errors = c.gpio_errors;
+  if (loop.fault() != FaultCause::kNone) s.fault = FaultCauseName(loop.fault());
   s.rate_hz = rate_hz;
   s.fast = fast;
   return s;
+}
+
+namespace {
+
+std::string Us(std::int64_t ns) { return Printf("%.1f", static_cast<double>(ns) / 1e3); }
+
+std::string FiguresText(const char* name, const LatencyFigures& f) {
+  if (f.count == 0) return Printf("%s (us): not measured\n", name);
+  return Printf("%s (us): p50 %s, p99 %s, p99.9 %s, max %s (%llu ticks)\n", name, Us(f.p50_ns).c_str(),
+                Us(f.p99_ns).c_str(), Us(f.p999_ns).c_str(), Us(f.max_ns).c_str(),
+                static_cast<unsigned long long>(f.count));
+}
+
+std::string FiguresJson(const LatencyFigures& f) {
+  return Printf("{\"count\": %llu, \"min\": %lld, \"p50\": %lld, \"p99\": %lld, \"p999\": %lld, \"max\": %lld}",
+                static_cast<unsigned long long>(f.count), static_cast<long long>(f.min_ns),
+                static_cast<long long>(f.p50_ns), static_cast<long long>(f.p99_ns), static_cast<long long>(f.p999_ns),
+                static_cast<long long>(f.max_ns));
+}
+
+}  // namespace
+
+std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s) {
+  const auto bins = h.bins();
+  std::size_t last = 0;
+  for (std::size_t i = 0; i < bins.size(); ++i)
+    if (bins[i] != 0) last = i;
+  std::string out = "# palpad wake-up latency histogram, 1 us bins (cyclictest -h layout)\n";
+  for (std::size_t i = 0; i <= last; ++i) out += Printf("%06zu %06u\n", i, bins[i]);
+  out += Printf("# Total: %09llu\n", static_cast<unsigned long long>(h.count()));
+  out += Printf("# Min Latencies: %05lld\n", static_cast<long long>(h.min_ns() / 1000));
+  out += Printf("# Avg Latencies: %05lld\n", static_cast<long long>(std::llround(h.mean_ns() / 1000)));
+  out += Printf("# Max Latencies: %05lld\n", static_cast<long long>(h.max_ns() / 1000));
+  out += Printf("# Histogram Overflows: %05llu\n", static_cast<unsigned long long>(h.overflow()));
+  out += Printf("# palpad max_ns: %lld\n", static_cast<long long>(h.max_ns()));
+  out += Printf("# palpad compute_ns: %lld %lld %lld %lld\n", static_cast<long long>(s.compute.p50_ns),
+                static_cast<long long>(s.compute.p99_ns), static_cast<long long>(s.compute.p999_ns),
+                static_cast<long long>(s.compute.max_ns));
+  out += Printf("# palpad overruns: %llu\n", static_cast<unsigned long long>(s.overruns));
+  out +=
+      Printf("# palpad max_consecutive_overruns: %llu\n", static_cast<unsigned long long>(s.max_consecutive_overruns));
+  out += Printf("# palpad dropped_rows: %llu\n", static_cast<unsigned long long>(s.dropped_rows));
+  out += Printf("# palpad rate_hz: %.17g\n", s.rate_hz);
+  out += Printf("# palpad realtime: %s\n", !s.realtime_requested ? "not requested" : s.realtime ? "yes" : "no");
+  out += "# palpad rt_refused: " + s.rt_refused + "\n";
+  return out;
+}
+
+std::string JsonString(std::string_view s) {
+  std::string out = "\"";
+  for (const char ch : s) {
+    const auto u = static_cast<unsigned char>(ch);
+    if (ch == '"' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (u < 0x20) {
+      out += Printf("\\u%04x", u);
+    } else {
+      out += ch;
+    }
+  }
+  out += '"';
+  return out;
 }
 
 std::string SummaryText(const ServoSummary& s) {
@@ -162,23 +231,47 @@ std::string SummaryText(const ServoSummary& s) {
   out += Printf("p99 tick (ns): %lld\n", static_cast<long long>(s.p99_tick_ns));
   out += Printf("force clamps: %llu\n", static_cast<unsigned long long>(s.force_clamps));
   out += Printf("device errors: %llu\n", static_cast<unsigned long long>(s.device_errors));
-  out += Printf("overruns: %llu\n", static_cast<unsigned long long>(s.overruns));
+  out += Printf("overruns: %llu (longest run %llu)\n", static_cast<unsigned long long>(s.overruns),
+                static_cast<unsigned long long>(s.max_consecutive_overruns));
   out += Printf("dropped rows: %llu\n", static_cast<unsigned long long>(s.dropped_rows));
+  out += Printf("e-stops: %llu (%llu ticks at zero force)\n", static_cast<unsigned long long>(s.estop_events),
+                static_cast<unsigned long long>(s.estop_ticks));
+  out += Printf("gpio errors: %llu\n", static_cast<unsigned long long>(s.gpio_errors));
+  out += Printf("watchdog trips: %llu\n", static_cast<unsigned long long>(s.watchdog_trips));
+  out += FiguresText("wake-up latency", s.wake);
+  out += FiguresText("compute time", s.compute);
   out += s.fast ? std::string("mode: fast\n") : Printf("mode: paced at %g Hz\n", s.rate_hz);
+  if (!s.realtime_requested) {
+    out += "real-time: not requested\n";
+  } else if (s.realtime) {
+    out += "real-time: yes\n";
+  } else {
+    out += "real-time: NO (refused: " + s.rt_refused + ")\n";
+  }
+  if (!s.end.empty()) out += "end: " + s.end + (s.fault.empty() ? "" : " (fault: " + s.fault + ")") + "\n";
   return out;
 }
 
 std::string SummaryJson(const ServoSummary& s) {
   // %.17g round-trips a double; the values are finite by construction.
-  return Printf(
+  std::string out = Printf(
       "{\"ticks\": %llu, \"contact_ticks\": %llu, \"max_force_n\": %.17g, \"max_penetration_mm\": %.17g, "
       "\"median_tick_ns\": %lld, \"p99_tick_ns\": %lld, \"force_clamps\": %llu, \"device_errors\": %llu, "
-      "\"overruns\": %llu, \"dropped_rows\": %llu, \"rate_hz\": %.17g, \"fast\": %s}\n",
+      "\"overruns\": %llu, \"max_consecutive_overruns\": %llu, \"dropped_rows\": %llu, \"estop_events\": %llu, "
+      "\"estop_ticks\": %llu, \"gpio_errors\": %llu, \"watchdog_trips\": %llu, ",
       static_cast<unsigned long long>(s.ticks), static_cast<unsigned long long>(s.contact_ticks), s.max_force_n,
       s.max_penetration_mm, static_cast<long long>(s.median_tick_ns), static_cast<long long>(s.p99_tick_ns),
       static_cast<unsigned long long>(s.force_clamps), static_cast<unsigned long long>(s.device_errors),
-      static_cast<unsigned long long>(s.overruns), static_cast<unsigned long long>(s.dropped_rows), s.rate_hz,
-      s.fast ? "true" : "false");
+      static_cast<unsigned long long>(s.overruns), static_cast<unsigned long long>(s.max_consecutive_overruns),
+      static_cast<unsigned long long>(s.dropped_rows), static_cast<unsigned long long>(s.estop_events),
+      static_cast<unsigned long long>(s.estop_ticks), static_cast<unsigned long long>(s.gpio_errors),
+      static_cast<unsigned long long>(s.watchdog_trips));
+  out += "\"wake_latency_ns\": " + FiguresJson(s.wake) + ", \"compute_ns\": " + FiguresJson(s.compute) + ", ";
+  out += Printf("\"rate_hz\": %.17g, \"fast\": %s, \"realtime_requested\": %s, \"realtime\": %s, ", s.rate_hz,
+                s.fast ? "true" : "false", s.realtime_requested ? "true" : "false", s.realtime ? "true" : "false");
+  out += "\"rt_refused\": " + JsonString(s.rt_refused) + ", \"end\": " + JsonString(s.end) +
+         ", \"fault\": " + JsonString(s.fault) + "}\n";
+  return out;
 }
 
 }  // namespace palpa::servo

@@ -1,104 +1,242 @@
 #include "palpa/servo/servo_loop.h"
 
-#include <cerrno>
 #include <cmath>
 #include <ctime>
 
 namespace palpa::servo {
 namespace {
 
-constexpr std::int64_t kNsPerS = 1'000'000'000;
+constexpr std::int64_t kFullRingWaitNs = 100'000;  // lockstep replay waiting for the drain: 0.1 ms naps
 
-// CLOCK_MONOTONIC through the vDSO: no system call on Linux x86-64/aarch64.
-std::int64_t NowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return std::int64_t{ts.tv_sec} * kNsPerS + ts.tv_nsec;
-}
-
-void SleepUntil(std::int64_t deadline_ns, const std::atomic<bool>& stop) {
-  timespec ts{};
-  ts.tv_sec = static_cast<time_t>(deadline_ns / kNsPerS);
-  ts.tv_nsec = static_cast<long>(deadline_ns % kNsPerS);
-  // A signal (SIGINT/SIGTERM) interrupts the sleep; the caller then sees the stop flag.
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-    if (stop.load(std::memory_order_acquire)) return;
-  }
+// Lockstep replay only (not RT): a short relative sleep while the drain catches up.
+void Nap() {
+  timespec ts{0, kFullRingWaitNs};
+  nanosleep(&ts, nullptr);
 }
 
 }  // namespace
 
+const char* LoopStateName(LoopState s) {
+  switch (s) {
+    case LoopState::kRunning:
+      return "running";
+    case LoopState::kEstop:
+      return "e-stop";
+    case LoopState::kRamp:
+      return "ramp";
+    case LoopState::kFault:
+      return "fault";
+  }
+  return "?";
+}
+
+const char* FaultCauseName(FaultCause c) {
+  switch (c) {
+    case FaultCause::kNone:
+      return "none";
+    case FaultCause::kOverruns:
+      return "consecutive overruns";
+    case FaultCause::kWatchdog:
+      return "watchdog (tick did not complete)";
+  }
+  return "?";
+}
+
+const char* RunEndName(RunEnd e) {
+  switch (e) {
+    case RunEnd::kEnded:
+      return "ended";
+    case RunEnd::kStopped:
+      return "stopped";
+    case RunEnd::kDeviceError:
+      return "device error";
+    case RunEnd::kInvalidRate:
+      return "invalid rate";
+    case RunEnd::kOverrunFault:
+      return "overrun fault";
+    case RunEnd::kWatchdogFault:
+      return "watchdog fault";
+  }
+  return "?";
+}
+
 ServoLoop::ServoLoop(const blob::FieldView& field, const proxy::ProxyParams& params, device::HapticDevice& device,
-                     std::size_t log_capacity, const std::atomic<bool>& stop)
+                     const ServoConfig& config, const std::atomic<bool>& stop)
     : sampler_(field),
       params_(params),
       frame_(proxy::GridFrame::Of(field)),
       device_(device),
+      config_(config),
+      clock_(config.clock != nullptr ? *config.clock : rt::MonotonicClock()),
       stop_(stop),
-      rows_(log_capacity),  // value-initialised: every page is touched now, not in the loop
-      tick_ns_(log_capacity) {}
+      ring_(config.telemetry_capacity),
+      wake_(std::make_unique<WakeLatencyHistogram>()),  // value-initialised: every page touched now
+      compute_(std::make_unique<ComputeHistogram>()) {
+  if (config_.estop_release_ticks == 0) config_.estop_release_ticks = 1;
+}
+
+ServoLoop::ServoLoop(const blob::FieldView& field, const proxy::ProxyParams& params, device::HapticDevice& device,
+                     std::size_t telemetry_capacity, const std::atomic<bool>& stop)
+    : ServoLoop(field, params, device, ServoConfig{.telemetry_capacity = telemetry_capacity, .overrun_fault_limit = 0},
+                stop) {}
+
+std::array<std::span<const std::byte>, 3> ServoLoop::buffers() const {
+  return {ring_.storage(), std::as_bytes(std::span<const WakeLatencyHistogram>(wake_.get(), 1)),
+          std::as_bytes(std::span<const ComputeHistogram>(compute_.get(), 1))};
+}
+
+void ServoLoop::RequestFault(FaultCause cause) noexcept {
+  int expected = 0;
+  fault_request_.compare_exchange_strong(expected, static_cast<int>(cause), std::memory_order_acq_rel);
+}
 
 void ServoLoop::WriteZeroForce() {
   if (device_.Write({0.0, 0.0, 0.0}) == device::IoStatus::kError) ++counters_.device_errors;
 }
 
-StepResult ServoLoop::Step() {
-  const std::int64_t start_ns = NowNs();
+StepResult ServoLoop::EnterFault(FaultCause cause) {
+  WriteZeroForce();
+  if (loop_state_ != LoopState::kFault) {
+    loop_state_ = LoopState::kFault;
+    fault_ = cause;
+  }
+  return StepResult::kFault;
+}
+
+// The e-stop filter: asserted at once (a failed read counts as asserted), released only after
+// estop_release_ticks consecutive released reads. Returns true while the force must be zero.
+bool ServoLoop::ReadEstop(std::uint32_t& flags) {
+  if (config_.estop == nullptr) return false;
+  bool level = false;
+  bool asserted = true;  // fail-safe
+  if (config_.estop->Read(level) == gpio::GpioStatus::kOk) {
+    asserted = level == config_.estop_active_high;
+  } else {
+    ++counters_.gpio_errors;
+    flags |= kFlagGpioError;
+  }
+  if (asserted) {
+    if (loop_state_ != LoopState::kEstop) ++counters_.estop_events;
+    loop_state_ = LoopState::kEstop;
+    release_count_ = 0;
+    return true;
+  }
+  if (loop_state_ == LoopState::kEstop) {
+    if (++release_count_ < config_.estop_release_ticks) return true;
+    // Released: the proxy restarts at the HIP (ProxyState::valid = false) and the force ramps in.
+    state_ = proxy::ProxyState{};
+    ramp_tick_ = 0;
+    loop_state_ = config_.ramp_ticks > 0 ? LoopState::kRamp : LoopState::kRunning;
+  }
+  return false;
+}
+
+StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) {
+  tick_seq_.fetch_add(1, std::memory_order_acq_rel);  // odd: inside a tick
+  TelemetrySample& s = pending_;
+  s = TelemetrySample{};
+  s.tick = tick_index_;
+  s.wake_latency_ns = wake_latency_ns;
+
+  StepResult result = StepResult::kRunning;
+  if (config_.tick_line != nullptr) {
+    tick_level_ = !tick_level_;
+    if (config_.tick_line->Set(tick_level_) == gpio::GpioStatus::kError) {
+      ++counters_.gpio_errors;
+      s.flags |= kFlagGpioError;
+    }
+  }
+  const bool estop = ReadEstop(s.flags);
+
   device::HipReading reading;
-  switch (device_.Read(reading)) {
-    case device::IoStatus::kOk:
-      break;
-    case device::IoStatus::kEnd:
-      WriteZeroForce();
-      return StepResult::kEnded;
-    case device::IoStatus::kError:
-      ++counters_.device_errors;
-      WriteZeroForce();
-      return StepResult::kDeviceError;
+  const device::IoStatus read_status = device_.Read(reading);
+  if (read_status != device::IoStatus::kOk) {
+    if (read_status == device::IoStatus::kError) ++counters_.device_errors;
+    WriteZeroForce();
+    tick_seq_.fetch_add(1, std::memory_order_acq_rel);
+    return read_status == device::IoStatus::kEnd ? StepResult::kEnded : StepResult::kDeviceError;
+  }
+  // The device call may have stalled while the watchdog latched a fault: no computed force now.
+  if (const int f = fault_request_.load(std::memory_order_acquire); f != 0) {
+    result = EnterFault(static_cast<FaultCause>(f));
+    tick_seq_.fetch_add(1, std::memory_order_acq_rel);
+    return result;
   }
 
-  const proxy::TickResult r = proxy::ProxyTick(sampler_, params_, state_, frame_.ToGrid(reading.hip_m));
-  // Q16.16 → double is exact (|raw| < 2^31 fits a 53-bit mantissa).
-  const std::array<double, 3> force_n = {r.force[0].value.ToDouble(), r.force[1].value.ToDouble(),
-                                         r.force[2].value.ToDouble()};
+  s.row.t_s = reading.t_s;
+  s.row.hip_m = reading.hip_m;
+  std::array<double, 3> force_n = {0.0, 0.0, 0.0};
+  if (estop) {
+    s.flags |= kFlagEstop;
+    s.row.proxy_m = reading.hip_m;  // the proxy restarts here on release
+    ++counters_.estop_ticks;
+  } else {
+    const proxy::TickResult r = proxy::ProxyTick(sampler_, params_, state_, frame_.ToGrid(reading.hip_m));
+    // Q16.16 → double is exact (|raw| < 2^31 fits a 53-bit mantissa).
+    force_n = {r.force[0].value.ToDouble(), r.force[1].value.ToDouble(), r.force[2].value.ToDouble()};
+    if (loop_state_ == LoopState::kRamp) {
+      ++ramp_tick_;
+      const double scale = static_cast<double>(ramp_tick_) / static_cast<double>(config_.ramp_ticks);
+      for (double& f : force_n) f *= scale;
+      s.flags |= kFlagRamp;
+      if (ramp_tick_ >= config_.ramp_ticks) loop_state_ = LoopState::kRunning;
+    }
+    s.row.proxy_m = frame_.ToMetres(r.proxy);
+    s.row.contact = r.contact;
+    if (r.clamped) {
+      s.flags |= kFlagClamped;
+      ++counters_.force_clamps;
+    }
+    if (r.contact) {
+      ++counters_.contact_ticks;
+      const double penetration_m = static_cast<double>(r.penetration_q16) / 65536.0 * frame_.voxel_m;
+      if (penetration_m > counters_.max_penetration_m) counters_.max_penetration_m = penetration_m;
+    }
+  }
+  s.row.force_n = force_n;
   const device::IoStatus write_status = device_.Write(force_n);
-  const std::int64_t end_ns = NowNs();
+  const std::int64_t end_ns = clock_.NowNs();
+  s.compute_ns = end_ns - start_ns;
 
   ++counters_.ticks;
-  if (r.contact) {
-    ++counters_.contact_ticks;
-    const double penetration_m = static_cast<double>(r.penetration_q16) / 65536.0 * frame_.voxel_m;
-    if (penetration_m > counters_.max_penetration_m) counters_.max_penetration_m = penetration_m;
-  }
-  if (r.clamped) ++counters_.force_clamps;
+  ++tick_index_;
   const double f = std::sqrt(force_n[0] * force_n[0] + force_n[1] * force_n[1] + force_n[2] * force_n[2]);
   if (f > counters_.max_force_n) counters_.max_force_n = f;
+  compute_->Add(s.compute_ns);
+  if (wake_latency_ns >= 0) wake_->Add(wake_latency_ns);
 
-  if (row_count_ < rows_.size()) {
-    LogRow& row = rows_[row_count_];
-    row.t_s = reading.t_s;
-    row.hip_m = reading.hip_m;
-    row.proxy_m = frame_.ToMetres(r.proxy);
-    row.force_n = force_n;
-    row.contact = r.contact;
-    tick_ns_[row_count_] = end_ns - start_ns;
-    ++row_count_;
+  if (write_status != device::IoStatus::kOk) {
+    if (write_status == device::IoStatus::kError) ++counters_.device_errors;
+    WriteZeroForce();
+    result = write_status == device::IoStatus::kEnd ? StepResult::kEnded : StepResult::kDeviceError;
+  }
+  tick_seq_.fetch_add(1, std::memory_order_acq_rel);  // even: between ticks
+  return result;
+}
+
+void ServoLoop::Publish() {
+  if (config_.wait_when_full) {
+    while (!ring_.TryPush(pending_)) {
+      if (stop_.load(std::memory_order_acquire)) {
+        (void)ring_.Push(pending_);  // stopping: count it as dropped rather than wait
+        break;
+      }
+      Nap();
+    }
   } else {
-    ++counters_.dropped_rows;  // never grow in the loop
+    (void)ring_.Push(pending_);
   }
+  counters_.dropped_rows = ring_.dropped();
+}
 
-  switch (write_status) {
-    case device::IoStatus::kOk:
-      return StepResult::kRunning;
-    case device::IoStatus::kEnd:
-      WriteZeroForce();
-      return StepResult::kEnded;
-    case device::IoStatus::kError:
-      break;
-  }
-  ++counters_.device_errors;
-  WriteZeroForce();
-  return StepResult::kDeviceError;
+StepResult ServoLoop::Step() {
+  if (loop_state_ == LoopState::kFault) return EnterFault(fault_);
+  if (const int f = fault_request_.load(std::memory_order_acquire); f != 0)
+    return EnterFault(static_cast<FaultCause>(f));
+  const std::uint64_t ticks_before = counters_.ticks;
+  const StepResult r = Tick(clock_.NowNs(), -1);
+  if (counters_.ticks != ticks_before) Publish();
+  return r;
 }
 
 RunEnd ServoLoop::Run(bool fast, double rate_hz) {
@@ -106,36 +244,84 @@ RunEnd ServoLoop::Run(bool fast, double rate_hz) {
     WriteZeroForce();
     return RunEnd::kInvalidRate;
   }
-  RunEnd end = RunEnd::kStopped;
   const auto period_ns = fast ? std::int64_t{0} : static_cast<std::int64_t>(std::llround(1e9 / rate_hz));
-  std::int64_t deadline_ns = NowNs();
+  RunEnd end = RunEnd::kStopped;
+  std::int64_t deadline_ns = clock_.NowNs() + period_ns;  // the first tick, too, wakes from a sleep
   for (;;) {
     if (stop_.load(std::memory_order_acquire)) {
       end = RunEnd::kStopped;
       break;
     }
-    const StepResult s = Step();
-    if (s == StepResult::kEnded) {
-      end = RunEnd::kEnded;
+    std::int64_t wake_latency_ns = -1;
+    std::int64_t start_ns = 0;
+    if (!fast) {
+      clock_.SleepUntilNs(deadline_ns, stop_);
+      if (stop_.load(std::memory_order_acquire)) {
+        end = RunEnd::kStopped;
+        break;
+      }
+      start_ns = clock_.NowNs();
+      wake_latency_ns = start_ns - deadline_ns;
+    } else {
+      start_ns = clock_.NowNs();
+    }
+    if (const int f = fault_request_.load(std::memory_order_acquire); f != 0) {
+      EnterFault(static_cast<FaultCause>(f));
+    } else {
+      const std::uint64_t ticks_before = counters_.ticks;
+      const StepResult s = Tick(start_ns, wake_latency_ns);
+      const bool ticked = counters_.ticks != ticks_before;
+      if (ticked && !fast) {
+        deadline_ns += period_ns;
+        const std::int64_t end_ns = start_ns + pending_.compute_ns;
+        if (end_ns > deadline_ns) {
+          // Late: keep the grid start + n·period but jump to its first point after now, so
+          // missed ticks are skipped instead of run back to back.
+          pending_.flags |= kFlagOverrun;
+          ++counters_.overruns;
+          ++consecutive_overruns_;
+          if (consecutive_overruns_ > counters_.max_consecutive_overruns)
+            counters_.max_consecutive_overruns = consecutive_overruns_;
+          deadline_ns += ((end_ns - deadline_ns) / period_ns + 1) * period_ns;
+        } else {
+          consecutive_overruns_ = 0;
+        }
+      }
+      if (ticked) Publish();
+      if (s == StepResult::kEnded) {
+        end = RunEnd::kEnded;
+        break;
+      }
+      if (s == StepResult::kDeviceError) {
+        end = RunEnd::kDeviceError;
+        break;
+      }
+      if (s == StepResult::kRunning && config_.overrun_fault_limit != 0 &&
+          consecutive_overruns_ >= config_.overrun_fault_limit) {
+        EnterFault(FaultCause::kOverruns);
+      }
+    }
+    if (loop_state_ == LoopState::kFault) {
+      end = fault_ == FaultCause::kOverruns ? RunEnd::kOverrunFault : RunEnd::kWatchdogFault;
       break;
     }
-    if (s == StepResult::kDeviceError) {
-      end = RunEnd::kDeviceError;
-      break;
-    }
-    if (fast) continue;
-    deadline_ns += period_ns;
-    const std::int64_t now_ns = NowNs();
-    if (now_ns > deadline_ns) {
-      // Late: keep the grid start + n·period but jump to its next point after now, so missed
-      // ticks are skipped instead of run back to back.
-      ++counters_.overruns;
-      deadline_ns += ((now_ns - deadline_ns) / period_ns + 1) * period_ns;
-    }
-    SleepUntil(deadline_ns, stop_);
   }
   WriteZeroForce();  // the last action of every run
   return end;
+}
+
+std::span<const LogRow> ServoLoop::rows() const {
+  rows_snapshot_.clear();
+  rows_snapshot_.reserve(ring_.size());
+  ring_.ForEachQueued([&](const TelemetrySample& s) { rows_snapshot_.push_back(s.row); });
+  return rows_snapshot_;
+}
+
+std::span<const std::int64_t> ServoLoop::tick_ns() const {
+  tick_ns_snapshot_.clear();
+  tick_ns_snapshot_.reserve(ring_.size());
+  ring_.ForEachQueued([&](const TelemetrySample& s) { tick_ns_snapshot_.push_back(s.compute_ns); });
+  return tick_ns_snapshot_;
 }
 
 }  // namespace palpa::servo

@@ -1,10 +1,14 @@
-// palpad's command line. A small hand-written parser: the controller cross-builds with nothing
-// but the C++ standard library. Non-RT.
+// palpad's command line and config file. A small hand-written parser over one option table: the
+// config file (--config, TOML; config.h) sets the same options, and the command line wins.
+// Non-RT.
 #pragma once
 
 #include <expected>
+#include <optional>
 #include <span>
 #include <string>
+
+#include "palpa/gpio/gpio.h"
 
 namespace palpa::palpad {
 
@@ -13,26 +17,58 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitRunFailed = 1;  ///< device error during the run, or the output could not be written
 inline constexpr int kExitBadInput = 2;   ///< usage error, bad field blob, bad trace, bad parameters, bad output path
 inline constexpr int kExitNotBuilt = 3;   ///< the requested device backend is not in this build
+inline constexpr int kExitNoDevice = 3;   ///< the device is not available (no Falcon, no access, no firmware)
 
 /// Parsed options; defaults as documented in Usage().
 struct Options {
-  std::string device;             ///< "sim" (default) or "falcon"
+  std::string device;             ///< "sim" (default), "falcon" or "virtual-falcon"
   std::string field_path;         ///< blob v1
   std::string trace_path;         ///< HIP trace (required for --device sim)
   std::string out_path;           ///< output CSV
   std::string summary_json_path;  ///< empty: no JSON summary
+  std::string firmware_path;      ///< falcon/virtual-falcon: Novint firmware to upload if none runs
+  std::string faults;             ///< virtual-falcon: fault injection list (device_virtual_falcon::ParseFaults)
+  double usb_index = 0;           ///< falcon: which 0403:cb48 device (0-based, whole number)
+  double home_timeout_s = 60;     ///< falcon/virtual-falcon: homing time limit, 1..3600 s
   bool fast = false;
   double rate_hz = 1000;   ///< 1..10000
   double k_n_per_m = 800;  ///< checked by proxy::MakeProxyParams
   double max_force_n = 8;  ///< checked by proxy::MakeProxyParams
   bool help = false;       ///< --help/-h given: print Usage(), ignore the rest
+
+  // Runtime (issue 9, docs/runtime.md).
+  std::string config_path;             ///< --config: TOML file read before the command line
+  std::string status_path;             ///< --status: live status JSON, rewritten once a second
+  std::string latency_histogram_path;  ///< --latency-histogram: wake-up histogram after the run (cyclictest layout)
+  std::string record_path;             ///< --record: the HIP as read, a trace (.ptb binary, else text v2)
+  std::string record_timing_path;      ///< --record-timing: per-tick wake-up latency and compute time, CSV
+  double cpu = -1;                     ///< --cpu: pin the servo thread to this CPU; −1: not pinned
+  double priority = 80;                ///< --priority: SCHED_FIFO priority of the servo thread, 1..99
+  double overrun_limit = 10;           ///< --overrun-limit: consecutive overruns → fault; 0: never
+  double watchdog_ms = 50;             ///< --watchdog-ms: a tick running longer trips the watchdog; 0: off
+  std::string estop;                   ///< --estop CHIP:LINE (raw text; parsed into estop_line)
+  std::string estop_active = "high";   ///< --estop-active high|low
+  double estop_debounce = 5;           ///< --estop-debounce: released reads (ticks) before a release counts
+  double ramp_ms = 500;                ///< --ramp-ms: force ramp after an e-stop release, ms
+  std::string tick_gpio;               ///< --tick-gpio CHIP:LINE (raw text; parsed into tick_line)
+  bool check_config = false;           ///< --check-config: validate the options, print them, exit
+
+  // Parsed from the above by ParseArgs.
+  std::optional<gpio::LineSpec> estop_line;
+  bool estop_active_high = true;
+  std::optional<gpio::LineSpec> tick_line;
 };
 
-/// Parses `args` (argv without the program name). `--opt value` and `--opt=value` forms.
+/// Parses `args` (argv without the program name). `--opt value` and `--opt=value` forms. With
+/// --config PATH, the file's keys are applied first and the command line overrides them.
 /// Errors (one sentence): unknown option, missing or repeated value, positional argument,
 /// a number that is not a finite decimal, --rate outside 1..10000, unknown --device, a missing
-/// required option (--field, --out; --trace for sim).
+/// required option (--field, --out; --trace for sim), a bad CHIP:LINE, a runtime option out of
+/// range. Config file errors name the file, line and key: "palpad.toml:4: key 'rate': …".
 std::expected<Options, std::string> ParseArgs(std::span<const char* const> args);
+
+/// The effective options as TOML (what --check-config prints; a valid config file).
+std::string OptionsToml(const Options& o);
 
 /// Multi-line usage text.
 const char* Usage();

@@ -21,6 +21,10 @@ inline constexpr std::string_view kCsvHeader =
 /// Writes the header and `rows` to `out`: times and metres with %.12g, newtons with %.9g (both
 /// more digits than a Q16.16 LSB needs), contact 0/1. Same rows → same bytes. False on an I/O error.
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows);
+/// The header line alone (what WriteCsv writes first).
+bool WriteCsvHeader(std::FILE* out);
+/// One row, formatted as WriteCsv does (the telemetry drain writes rows as they arrive).
+bool WriteCsvRow(std::FILE* out, const LogRow& row);
 
 /// A file written under a temporary name in the target's directory and renamed over the target
 /// only by Commit(), after fsync: readers see the old file or the complete new one, never a part.
@@ -53,34 +57,82 @@ class AtomicFile {
 /// WriteCsv through an AtomicFile.
 std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::span<const LogRow> rows);
 
+/// Percentiles of one histogram, ns (nearest rank, bin lower edge; see palpa/rt/histogram.h).
+struct LatencyFigures {
+  std::uint64_t count = 0;
+  std::int64_t min_ns = 0;
+  std::int64_t p50_ns = 0;
+  std::int64_t p99_ns = 0;
+  std::int64_t p999_ns = 0;
+  std::int64_t max_ns = 0;  ///< exact
+  double mean_ns = 0;
+};
+
+template <typename Histogram>
+LatencyFigures FiguresOf(const Histogram& h) {
+  return {h.count(),  h.min_ns(), h.PercentileNs(0.5), h.PercentileNs(0.99), h.PercentileNs(0.999),
+          h.max_ns(), h.mean_ns()};
+}
+
 /// The run in numbers, for people (SummaryText) and scripts (SummaryJson).
 struct ServoSummary {
   std::uint64_t ticks = 0;
   std::uint64_t contact_ticks = 0;
   double max_force_n = 0;
   double max_penetration_mm = 0;
-  std::int64_t median_tick_ns = 0;  ///< over logged ticks (upper median); 0 if none
-  std::int64_t p99_tick_ns = 0;     ///< nearest-rank 99th percentile over logged ticks; 0 if none
+  std::int64_t median_tick_ns = 0;  ///< compute time p50 (10 ns bins); 0 if no tick
+  std::int64_t p99_tick_ns = 0;     ///< compute time p99 (10 ns bins); 0 if no tick
   std::uint64_t force_clamps = 0;
   std::uint64_t device_errors = 0;
   std::uint64_t overruns = 0;
-  std::uint64_t dropped_rows = 0;
+  std::uint64_t max_consecutive_overruns = 0;
+  std::uint64_t dropped_rows = 0;  ///< telemetry samples the ring dropped
+  std::uint64_t estop_events = 0;
+  std::uint64_t estop_ticks = 0;
+  std::uint64_t gpio_errors = 0;
+  std::uint64_t watchdog_trips = 0;
+  LatencyFigures wake;     ///< wake-up latency (paced runs; count 0 in fast mode)
+  LatencyFigures compute;  ///< compute time per tick
+  std::string end;         ///< RunEndName, e.g. "ended"; empty if not set
+  std::string fault;       ///< FaultCauseName when a fault latched, else empty
   double rate_hz = 0;
   bool fast = false;
+  /// Real-time set-up: requested for paced runs; `realtime` false with `rt_refused` naming the
+  /// refused steps when the system refused any (rt::RtSetup::Refused()).
+  bool realtime_requested = false;
+  bool realtime = false;
+  std::string rt_refused;
 };
 
 /// Nearest-rank percentile (q in [0, 1]) of `ns` by nth_element on a copy; 0 for an empty span.
 std::int64_t PercentileNs(std::span<const std::int64_t> ns, double q);
 
+/// Counters and histograms of `loop`; the caller fills end, watchdog_trips and the RT fields.
 ServoSummary Summarize(const ServoLoop& loop, bool fast, double rate_hz);
 
 /// `key: value` lines: ticks, ticks in contact, max force (N), max penetration (mm),
-/// median tick (ns), p99 tick (ns), force clamps, device errors, overruns, dropped rows,
-/// mode (fast | paced at N Hz).
+/// median tick (ns), p99 tick (ns), force clamps, device errors, overruns (and the longest run of
+/// consecutive ones), dropped samples, e-stops, GPIO errors, watchdog trips, wake-up latency and
+/// compute time (p50/p99/p99.9/max, µs), mode (fast | paced at N Hz), real-time (yes | NO, with
+/// the refused steps | not requested), end (and fault).
 std::string SummaryText(const ServoSummary& s);
 
-/// One JSON object: ticks, contact_ticks, max_force_n, max_penetration_mm, median_tick_ns,
-/// p99_tick_ns, force_clamps, device_errors, overruns, dropped_rows, rate_hz, fast.
+/// One JSON object with the same figures: ticks, contact_ticks, max_force_n, max_penetration_mm,
+/// median_tick_ns, p99_tick_ns, force_clamps, device_errors, overruns, max_consecutive_overruns,
+/// dropped_rows, estop_events, estop_ticks, gpio_errors, watchdog_trips, wake_latency_ns {count,
+/// min, p50, p99, p999, max}, compute_ns {…}, rate_hz, fast, realtime_requested, realtime,
+/// rt_refused, end, fault.
 std::string SummaryJson(const ServoSummary& s);
+
+/// The wake-up latency histogram in cyclictest's histogram file layout (rt-tests `-h US
+/// --histfile`): "%06d %06d" per 1 µs bin up to the last non-empty one, then "# Total:",
+/// "# Min Latencies:", "# Avg Latencies:", "# Max Latencies:" (µs, truncated),
+/// "# Histogram Overflows:"; then palpad's own "# palpad <key>: <value>" lines: max_ns, compute_ns
+/// (p50 p99 p999 max), overruns, max_consecutive_overruns, dropped_rows, rate_hz, realtime,
+/// rt_refused. The same parser reads palpad's and cyclictest's files (palpa bench latency).
+std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s);
+
+/// `s` as a JSON string literal (quotes, backslashes and control characters escaped).
+std::string JsonString(std::string_view s);
 
 }  // namespace palpa::servo

@@ -1,25 +1,50 @@
 // The servo loop: read the HIP, run the proxy (paper §3.3 eq. 9) and force (§3.4 eq. 10), write
 // the force — once per tick, on one thread.
 //
+// Per tick: toggle the tick line (if any) → read the e-stop line (if any) → Read the device →
+// proxy + force (zero while the e-stop is asserted, ramped in after its release) → Write → time
+// stamps into fixed histograms → one TelemetrySample into the SPSC ring. Nothing else leaves the
+// loop: a non-RT thread drains the ring (TelemetryDrain) to the output CSV and the status.
+//
+// Pacing (Run, paced): absolute deadlines start + n·period with clock_nanosleep(TIMER_ABSTIME).
+// Wake-up latency = wake time − deadline; compute time = wake-up to after the force write.
+// Overrun policy: a tick that ends after the next deadline is an overrun; the loop then skips to
+// the first deadline still in the future (missed ticks are never run back to back). After
+// `overrun_fault_limit` consecutive overruns the loop writes zero force, latches the fault state
+// and Run returns kOverrunFault.
+//
+// E-stop: asserted (the configured level, or a failed read) → zero force in the same tick, the
+// proxy is not run. Released only after `estop_release_ticks` consecutive released reads
+// (debounce); then the proxy restarts at the HIP (ProxyState reset) and the force ramps from 0 to
+// 100 % over `ramp_ticks`. Assertion is never debounced: stopping must not wait.
+//
+// Watchdog hooks: tick_sequence() is odd while a tick runs; a watchdog thread (Watchdog) that sees
+// it stuck calls RequestFault, and the loop writes zero force as soon as the device call returns.
+//
 // Thread/RT rules: construct, inspect and report on any thread while the loop is not running
-// (non-RT: the constructor allocates the log). Step() and Run() belong to the servo thread. Inside
-// Step() there is no allocation, lock, exception or system call other than the device transfers
-// and clock_gettime(CLOCK_MONOTONIC) (vDSO); tests/firmware/alloc_free_test.cc checks it. Run()
-// adds clock_nanosleep in paced mode. The stop flag is the only thing another thread (or a signal
-// handler) touches during a run.
+// (non-RT: the constructor allocates the ring and histograms). Step() and Run() belong to the
+// servo thread. Inside them there is no allocation, lock or exception, and the system calls are
+// the device's and the GPIO lines' transfers, the clock read (vDSO) and, paced, clock_nanosleep;
+// tests/firmware/alloc_free_test.cc and rt_test.cc check it. Only the stop flag, RequestFault and
+// the ring's consumer side are touched by other threads during a run.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <type_traits>
 #include <vector>
 
 #include "palpa/blob/blob.h"
 #include "palpa/device/haptic_device.h"
+#include "palpa/gpio/gpio.h"
 #include "palpa/proxy/proxy.h"
+#include "palpa/rt/clock.h"
+#include "palpa/rt/histogram.h"
+#include "palpa/rt/spsc_ring.h"
 #include "palpa/sampler/trilinear.h"
 
 namespace palpa::servo {
@@ -27,26 +52,93 @@ namespace palpa::servo {
 // Set from signal handlers and read by the loop: must be a plain lock-free atomic.
 static_assert(std::atomic<bool>::is_always_lock_free);
 
-/// One logged tick (the output CSV row). Device frame.
+/// One tick as the output CSV row. Device frame.
 struct LogRow {
   double t_s = 0;                   ///< device time of the HIP sample, s
   std::array<double, 3> hip_m{};    ///< HIP as read, m
   std::array<double, 3> proxy_m{};  ///< proxy after the tick, m (the Q16.16 grid position converted)
-  std::array<double, 3> force_n{};  ///< force written, N (the Q16.16 force converted exactly)
+  std::array<double, 3> force_n{};  ///< force written, N (the Q16.16 force converted exactly, times the ramp)
   bool contact = false;             ///< proxy held apart from the HIP by the surface
 };
 static_assert(std::is_trivially_copyable_v<LogRow>);
 
+/// TelemetrySample::flags bits.
+enum TelemetryFlag : std::uint32_t {
+  kFlagClamped = 1u << 0,    ///< |f| hit max_force
+  kFlagEstop = 1u << 1,      ///< e-stop asserted: zero force, proxy not run
+  kFlagRamp = 1u << 2,       ///< force scaled down while ramping in after an e-stop
+  kFlagOverrun = 1u << 3,    ///< the tick ended after the next deadline
+  kFlagGpioError = 1u << 4,  ///< a GPIO access failed this tick
+};
+
+/// What one tick sends through the ring.
+struct TelemetrySample {
+  std::uint64_t tick = 0;             ///< 0-based tick index
+  LogRow row;                         ///< the CSV row
+  std::int64_t wake_latency_ns = -1;  ///< paced: wake time − deadline, ns; −1 when not paced
+  std::int64_t compute_ns = 0;        ///< wake-up (or Step start) to after the force write, ns
+  std::uint32_t flags = 0;            ///< TelemetryFlag bits
+};
+static_assert(std::is_trivially_copyable_v<TelemetrySample>);
+
+/// Telemetry ring type: drops the newest sample when full (counted), never blocks the loop.
+using TelemetryRing = rt::SpscRing<TelemetrySample, rt::OnFull::kDropNewest>;
+
+/// Wake-up latency: 1 µs bins (cyclictest's unit) up to 20 ms, the worst seen on the dev VM ×2.
+using WakeLatencyHistogram = rt::LinearHistogram<1000, 20000>;
+/// Compute time: 10 ns bins up to 500 µs (a tick takes ~1-10 µs natively, ~20× that under qemu).
+using ComputeHistogram = rt::LinearHistogram<10, 50000>;
+
+/// The loop's state machine.
+enum class LoopState {
+  kRunning,  ///< rendering forces
+  kEstop,    ///< e-stop asserted (or its release not yet debounced): zero force
+  kRamp,     ///< released: the force ramps in
+  kFault,    ///< latched: zero force written, Run returns
+};
+const char* LoopStateName(LoopState s);
+
+/// Why the fault state was entered.
+enum class FaultCause {
+  kNone,
+  kOverruns,  ///< overrun_fault_limit consecutive overruns
+  kWatchdog,  ///< RequestFault: a tick did not complete in time (device stalled)
+};
+const char* FaultCauseName(FaultCause c);
+
+struct ServoConfig {
+  /// Telemetry ring capacity, samples. With no consumer the ring keeps the first `capacity` ticks.
+  std::size_t telemetry_capacity = 1u << 16;
+  /// false (RT): a full ring drops the sample (counted). true (lockstep replay only, not RT): the
+  /// loop waits for room, so the output is complete and deterministic; needs a running drain.
+  bool wait_when_full = false;
+  /// Consecutive overruns that latch the fault state; 0: never.
+  std::uint32_t overrun_fault_limit = 10;
+  /// Time source; nullptr: rt::MonotonicClock().
+  rt::Clock* clock = nullptr;
+  /// E-stop input; nullptr: none.
+  gpio::DigitalInput* estop = nullptr;
+  bool estop_active_high = true;          ///< the level that asserts the e-stop
+  std::uint32_t estop_release_ticks = 5;  ///< consecutive released reads before the release counts (≥ 1)
+  std::uint32_t ramp_ticks = 500;         ///< ticks for the force to ramp 0 → 100 % after a release; 0: at once
+  /// Output toggled at the start of every tick; nullptr: none.
+  gpio::DigitalOutput* tick_line = nullptr;
+};
+
 /// Counters the servo thread writes (house style §5); read them after the run.
 struct ServoCounters {
-  std::uint64_t ticks = 0;          ///< completed ticks (read, proxy, write)
+  std::uint64_t ticks = 0;          ///< completed ticks (read, proxy or e-stop, write)
   std::uint64_t contact_ticks = 0;  ///< ticks with contact
   std::uint64_t force_clamps = 0;   ///< ticks whose |f| hit max_force
   std::uint64_t device_errors = 0;  ///< failed reads/writes (each ends the run)
-  std::uint64_t dropped_rows = 0;   ///< ticks not logged because the log was full
-  std::uint64_t overruns = 0;       ///< paced mode: ticks that finished after the next deadline
-  double max_force_n = 0;           ///< max |f| written, N
-  double max_penetration_m = 0;     ///< max |X_p − X_h| in contact, m
+  std::uint64_t dropped_rows = 0;   ///< telemetry samples dropped because the ring was full
+  std::uint64_t overruns = 0;       ///< paced: ticks that ended after the next deadline
+  std::uint64_t max_consecutive_overruns = 0;
+  std::uint64_t estop_events = 0;  ///< e-stop assertions (released → asserted)
+  std::uint64_t estop_ticks = 0;   ///< ticks with the e-stop asserted (zero force)
+  std::uint64_t gpio_errors = 0;   ///< failed e-stop reads (treated as asserted) and tick-line writes
+  double max_force_n = 0;          ///< max |f| written, N
+  double max_penetration_m = 0;    ///< max |X_p − X_h| in contact, m
 };
 static_assert(std::is_trivially_copyable_v<ServoCounters>);
 
@@ -55,61 +147,103 @@ enum class StepResult {
   kRunning,      ///< tick done, keep going
   kEnded,        ///< the device reported kEnd (replay over); zero force written
   kDeviceError,  ///< a transfer failed; counted, zero force written
+  kFault,        ///< the fault state is latched; zero force written
 };
 
 /// Why Run() returned.
 enum class RunEnd {
-  kEnded,        ///< the device ran out (replay finished)
-  kStopped,      ///< the stop flag was set (SIGINT/SIGTERM)
-  kDeviceError,  ///< a device transfer failed
-  kInvalidRate,  ///< paced mode with rate_hz outside [1, 10000]; nothing ran
+  kEnded,          ///< the device ran out (replay finished)
+  kStopped,        ///< the stop flag was set (SIGINT/SIGTERM)
+  kDeviceError,    ///< a device transfer failed
+  kInvalidRate,    ///< paced mode with rate_hz outside [1, 10000]; nothing ran
+  kOverrunFault,   ///< overrun_fault_limit consecutive overruns
+  kWatchdogFault,  ///< the watchdog found a tick that did not complete
 };
+const char* RunEndName(RunEnd e);
 
 class ServoLoop {
  public:
   /// `field` must be verified (blob::Verify) and its buffer must outlive the loop; `params` from
-  /// proxy::MakeProxyParams for this field's voxel size; `device` outlives the loop; the log keeps
-  /// the first `log_capacity` ticks (rows and durations), later ticks count as dropped. `stop` is
-  /// polled once per tick. Non-RT: allocates and pre-faults the log.
+  /// proxy::MakeProxyParams for this field's voxel size; `device`, the clock and the GPIO lines
+  /// outlive the loop. `stop` is polled once per tick. Non-RT: allocates and touches the ring and
+  /// the histograms.
   ServoLoop(const blob::FieldView& field, const proxy::ProxyParams& params, device::HapticDevice& device,
-            std::size_t log_capacity, const std::atomic<bool>& stop);
+            const ServoConfig& config, const std::atomic<bool>& stop);
+  /// A plain replay loop: ServoConfig's defaults with a ring of `telemetry_capacity` samples
+  /// (undrained, it keeps the first `telemetry_capacity` ticks, rows(), and counts the rest as
+  /// dropped) and no overrun fault (overrun_fault_limit 0), no GPIO.
+  ServoLoop(const blob::FieldView& field, const proxy::ProxyParams& params, device::HapticDevice& device,
+            std::size_t telemetry_capacity, const std::atomic<bool>& stop);
 
   ServoLoop(const ServoLoop&) = delete;
   ServoLoop& operator=(const ServoLoop&) = delete;
 
-  /// One tick: Read → GridFrame::ToGrid → proxy::ProxyTick → Q16.16 force → N → Write, then the
-  /// row, counters and duration. On kEnd or an error: zero force written, nothing logged for a
-  /// failed read. RT-safe: no allocation, lock, exception; syscalls only the device's and the clock.
+  /// One tick now (no pacing; the wake-up latency is not measured). On kEnd, an error or a latched
+  /// fault: zero force written. RT-safe as described above.
   StepResult Step();
 
-  /// Ticks until the device ends, a transfer fails or `stop` is set. fast: back to back
-  /// (lockstep, deterministic output); paced: absolute deadlines start + n/rate_hz with
-  /// clock_nanosleep(TIMER_ABSTIME) — a late tick counts an overrun and the loop skips to the next
-  /// future deadline rather than running the missed ticks back to back. rate_hz in [1, 10000]
-  /// (checked only when paced). Always ends by writing zero force. Servo thread; RT-safe as Step().
+  /// Ticks until the device ends, a transfer fails, a fault latches or `stop` is set. fast: back
+  /// to back (lockstep, deterministic output); paced: see the file comment. rate_hz in [1, 10000]
+  /// (checked only when paced). Always ends by writing zero force. Servo thread; RT-safe.
   RunEnd Run(bool fast, double rate_hz);
 
+  /// Any thread (the watchdog): latch the fault state; the servo thread writes zero force at its
+  /// next check (after the device call in progress returns). Wait-free.
+  void RequestFault(FaultCause cause) noexcept;
+  /// Incremented at the start and at the end of every tick: odd while a tick runs. Any thread.
+  std::uint64_t tick_sequence() const { return tick_seq_.load(std::memory_order_acquire); }
+
   const ServoCounters& counters() const { return counters_; }
-  /// Logged rows, in tick order (at most log_capacity).
-  std::span<const LogRow> rows() const { return {rows_.data(), row_count_}; }
-  /// Duration of each logged tick, ns, from before Read to after Write.
-  std::span<const std::int64_t> tick_ns() const { return {tick_ns_.data(), row_count_}; }
+  LoopState state() const { return loop_state_; }
+  FaultCause fault() const { return fault_; }
+  const WakeLatencyHistogram& wake_latency() const { return *wake_; }
+  const ComputeHistogram& compute_time() const { return *compute_; }
+  /// The ring's consumer side belongs to one drain thread (or, after the run, to the caller).
+  TelemetryRing& telemetry() { return ring_; }
+  /// Memory the loop touches after start (ring, histograms), for rt::PrepareRealtimeThread.
+  std::array<std::span<const std::byte>, 3> buffers() const;
+
+  /// Non-RT, consumer side, after the run when nothing drains the ring: the queued (undrained)
+  /// rows, oldest first — without a drain, the first telemetry_capacity ticks. The span views a
+  /// snapshot the loop keeps; it stays valid until the next rows() call or the loop's end.
+  std::span<const LogRow> rows() const;
+  /// As rows(): each queued tick's compute time, ns (its own snapshot).
+  std::span<const std::int64_t> tick_ns() const;
+
   const proxy::ProxyState& proxy_state() const { return state_; }
   const proxy::GridFrame& frame() const { return frame_; }
 
  private:
+  StepResult Tick(std::int64_t start_ns, std::int64_t wake_latency_ns);
+  bool ReadEstop(std::uint32_t& flags);
+  void Publish();
   void WriteZeroForce();
+  StepResult EnterFault(FaultCause cause);
 
   sampler::TrilinearSampler sampler_;
   proxy::ProxyParams params_;
   proxy::GridFrame frame_;
   proxy::ProxyState state_;
   device::HapticDevice& device_;
+  ServoConfig config_;
+  rt::Clock& clock_;
   const std::atomic<bool>& stop_;
-  std::vector<LogRow> rows_;           // size fixed at construction; never grows
-  std::vector<std::int64_t> tick_ns_;  // same size as rows_
-  std::size_t row_count_ = 0;
+  TelemetryRing ring_;
+  std::unique_ptr<WakeLatencyHistogram> wake_;  // heap: 80 KB and 200 KB, allocated once
+  std::unique_ptr<ComputeHistogram> compute_;
+  TelemetrySample pending_;  // the last tick's sample, published by Publish()
   ServoCounters counters_;
+  LoopState loop_state_ = LoopState::kRunning;
+  FaultCause fault_ = FaultCause::kNone;
+  std::atomic<int> fault_request_{0};  // a FaultCause, set by RequestFault
+  std::atomic<std::uint64_t> tick_seq_{0};
+  std::uint64_t tick_index_ = 0;
+  std::uint64_t consecutive_overruns_ = 0;
+  std::uint32_t release_count_ = 0;  // consecutive released e-stop reads
+  std::uint32_t ramp_tick_ = 0;
+  bool tick_level_ = false;
+  mutable std::vector<LogRow> rows_snapshot_;  // rows(), tick_ns(): non-RT, after the run
+  mutable std::vector<std::int64_t> tick_ns_snapshot_;
 };
 
 }  // namespace palpa::servo

@@ -1,0 +1,250 @@
+// Proves the runtime paths of the servo tick allocation-, lock- and system-call-free: e-stop
+// assertion, debounced release and force ramp, the tick line, telemetry pushes into a full ring
+// (drops), consecutive overruns into the fault state, and a fault requested by the watchdog.
+// Global operator new/delete are replaced and malloc & co., pthread_mutex_lock and the system
+// calls a loop could slip in (sleeps, read/write, sched_yield) are wrapped at link
+// time (-Wl,--wrap=…, see CMakeLists.txt); while `g_armed` is set, each call is counted. On the
+// simulated clock the loop needs no system call at all, so any call is a finding. The detector
+// tests at the end prove that the counters see a call. (The base tick's test is alloc_free_test.cc.)
+
+#include <gtest/gtest.h>
+#include <pthread.h>
+#include <sched.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cstdarg>
+#include <cstdlib>
+#include <new>
+
+#include "palpa/gpio_sim/sim_gpio.h"
+#include "palpa/proxy/proxy.h"
+#include "palpa/servo/servo_loop.h"
+#include "runtime_fixtures.h"
+#include "sphere_fixture.h"
+
+namespace {
+
+thread_local bool g_armed = false;
+std::atomic<long> g_allocs{0};
+std::atomic<long> g_locks{0};
+std::atomic<long> g_syscalls{0};
+
+void CountAlloc() {
+  if (g_armed) g_allocs.fetch_add(1, std::memory_order_relaxed);
+}
+void CountSyscall() {
+  if (g_armed) g_syscalls.fetch_add(1, std::memory_order_relaxed);
+}
+
+class Armed {
+ public:
+  Armed() { g_armed = true; }
+  ~Armed() { g_armed = false; }
+  Armed(const Armed&) = delete;
+  Armed& operator=(const Armed&) = delete;
+};
+
+void ResetCounters() {
+  g_allocs = 0;
+  g_locks = 0;
+  g_syscalls = 0;
+}
+
+}  // namespace
+
+// ---- replaced global allocation functions ----
+void* operator new(std::size_t n) {
+  CountAlloc();
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) {
+  CountAlloc();
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, std::align_val_t al) {
+  CountAlloc();
+  const auto a = static_cast<std::size_t>(al);
+  if (void* p = std::aligned_alloc(a, ((n == 0 ? 1 : n) + a - 1) / a * a)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n, std::align_val_t al) { return operator new(n, al); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+// ---- link-time wraps ----
+extern "C" {
+void* __real_malloc(std::size_t n);
+void* __real_calloc(std::size_t n, std::size_t size);
+void* __real_realloc(void* p, std::size_t n);
+int __real_pthread_mutex_lock(pthread_mutex_t* m);
+int __real_clock_nanosleep(clockid_t c, int flags, const timespec* t, timespec* rem);
+int __real_nanosleep(const timespec* t, timespec* rem);
+int __real_usleep(useconds_t us);
+int __real_sched_yield();
+ssize_t __real_write(int fd, const void* buf, std::size_t n);
+ssize_t __real_read(int fd, void* buf, std::size_t n);
+
+void* __wrap_malloc(std::size_t n) {
+  CountAlloc();
+  return __real_malloc(n);
+}
+void* __wrap_calloc(std::size_t n, std::size_t size) {
+  CountAlloc();
+  return __real_calloc(n, size);
+}
+void* __wrap_realloc(void* p, std::size_t n) {
+  CountAlloc();
+  return __real_realloc(p, n);
+}
+int __wrap_pthread_mutex_lock(pthread_mutex_t* m) {
+  if (g_armed) g_locks.fetch_add(1, std::memory_order_relaxed);
+  return __real_pthread_mutex_lock(m);
+}
+int __wrap_clock_nanosleep(clockid_t c, int flags, const timespec* t, timespec* rem) {
+  CountSyscall();
+  return __real_clock_nanosleep(c, flags, t, rem);
+}
+int __wrap_nanosleep(const timespec* t, timespec* rem) {
+  CountSyscall();
+  return __real_nanosleep(t, rem);
+}
+int __wrap_usleep(useconds_t us) {
+  CountSyscall();
+  return __real_usleep(us);
+}
+int __wrap_sched_yield() {
+  CountSyscall();
+  return __real_sched_yield();
+}
+ssize_t __wrap_write(int fd, const void* buf, std::size_t n) {
+  CountSyscall();
+  return __real_write(fd, buf, n);
+}
+ssize_t __wrap_read(int fd, void* buf, std::size_t n) {
+  CountSyscall();
+  return __real_read(fd, buf, n);
+}
+}
+
+namespace palpa {
+namespace {
+
+using firmware_test::FakeClock;
+using firmware_test::SphereField;
+using firmware_test::TickDevice;
+
+constexpr std::int64_t kPeriod = 1'000'000;
+
+proxy::ProxyParams Params(double voxel_m) {
+  auto p = proxy::MakeProxyParams(proxy::ProxyConfig{}, voxel_m);
+  if (!p) {  // without parameters nothing below is meaningful: stop rather than read an empty expected
+    ADD_FAILURE() << "MakeProxyParams: " << p.error();
+    std::abort();
+  }
+  return *p;
+}
+
+// 1 mm outside → 1 mm inside over ticks 0..9, held; out at 150..159; in again at 240..249.
+std::vector<std::array<double, 3>> Scenario(const SphereField& field, std::size_t n) {
+  std::vector<std::array<double, 3>> hips(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double t = static_cast<double>(i);
+    double depth = std::min(1e-3, -1e-3 + 2e-3 * t / 9.0);
+    if (i >= 150) depth = std::max(-2e-3, 1e-3 - 3e-3 * (t - 150) / 9.0);
+    if (i >= 240) depth = std::min(1e-3, -2e-3 + 3e-3 * (t - 240) / 9.0);
+    hips[i] = field.PointAt(field.radius_m() - depth, {0, 1, 0});
+  }
+  return hips;
+}
+
+TEST(RtAllocFree, EstopRampTickLineDropsAndOverrunFaultTouchNoAllocatorLockOrSyscall) {
+  const SphereField field;
+  FakeClock clock;
+  const std::int64_t t0 = clock.now_ns;
+  const auto wake = [&](std::int64_t n) { return t0 + (n + 1) * kPeriod; };
+  gpio_sim::SimInput estop(clock, {{wake(100), true}, {wake(180), false}, {wake(182), true}, {wake(200), false}});
+  gpio_sim::SimOutput tick_line(clock, 1000);
+  std::vector<std::int64_t> cost(600, 20'000);
+  for (std::size_t i = 500; i < 600; ++i) cost[i] = 1'300'000;  // from tick 500: overruns → fault
+  TickDevice device(clock, Scenario(field, 600), cost);
+  std::atomic<bool> stop{false};
+  servo::ServoConfig c;
+  c.clock = &clock;
+  c.telemetry_capacity = 128;  // undrained: most samples are dropped, on the RT path
+  c.overrun_fault_limit = 5;
+  c.estop = &estop;
+  c.estop_release_ticks = 5;
+  c.ramp_ticks = 50;
+  c.tick_line = &tick_line;
+  servo::ServoLoop loop(field.view(), Params(field.voxel_m()), device, c, stop);
+
+  ResetCounters();
+  servo::RunEnd end{};
+  {
+    const Armed armed;
+    end = loop.Run(/*fast=*/false, 1000.0);
+  }
+  EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(g_locks.load(), 0);
+  EXPECT_EQ(g_syscalls.load(), 0);
+  // The paths under test were taken.
+  EXPECT_EQ(end, servo::RunEnd::kOverrunFault);
+  EXPECT_EQ(loop.counters().estop_events, 1u);
+  EXPECT_EQ(loop.counters().estop_ticks, 104u);
+  EXPECT_GT(loop.counters().contact_ticks, 200u);
+  EXPECT_EQ(loop.counters().ticks, 505u);
+  EXPECT_EQ(loop.counters().dropped_rows, 505u - 128u);
+  EXPECT_EQ(tick_line.sets(), 505u);
+}
+
+TEST(RtAllocFree, WatchdogFaultPathTouchesNothing) {
+  const SphereField field;
+  FakeClock clock;
+  TickDevice device(clock, Scenario(field, 100));
+  std::atomic<bool> stop{false};
+  servo::ServoConfig c;
+  c.clock = &clock;
+  servo::ServoLoop loop(field.view(), Params(field.voxel_m()), device, c, stop);
+  ResetCounters();
+  servo::StepResult first{}, faulted{};
+  {
+    const Armed armed;
+    for (int i = 0; i < 20; ++i) first = loop.Step();
+    loop.RequestFault(servo::FaultCause::kWatchdog);  // what the watchdog thread does
+    faulted = loop.Step();
+  }
+  EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(g_locks.load(), 0);
+  EXPECT_EQ(g_syscalls.load(), 0);
+  EXPECT_EQ(first, servo::StepResult::kRunning);
+  EXPECT_EQ(faulted, servo::StepResult::kFault);
+  EXPECT_EQ(device.writes().back(), (std::array<double, 3>{0, 0, 0}));
+}
+
+// The detector itself.
+TEST(RtAllocFree, DetectorSeesASleepAWriteAndAnAllocation) {
+  ResetCounters();
+  {
+    const Armed armed;
+    timespec ts{0, 1};
+    nanosleep(&ts, nullptr);
+    (void)!write(-1, "", 0);
+    void* volatile p = std::malloc(16);
+    std::free(p);
+  }
+  EXPECT_EQ(g_syscalls.load(), 2);
+  EXPECT_GE(g_allocs.load(), 1);
+}
+
+}  // namespace
+}  // namespace palpa
