@@ -1,0 +1,1143 @@
+// palpa hil run | bless | report: hardware-in-the-loop replay (docs/hil.md). Each case in
+// hil/cases.toml replays a trace from hil/traces/ through the palpad binary (the same fixed-point
+// core and device layer as on the board) on a field built at run time from the bundled data.
+//  - fast (lockstep): the per-tick output must match the committed golden bit for bit;
+//  - realtime: paced on the wall clock; checks invariants and reports latency, never goldens.
+// Both modes check the invariants (proxy outside, clamp, force slope, passivity) and, for the
+// sphere, the paper's Fig. 9 validation against the analytic force. Non-RT host code.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <fmt/core.h>
+#include <fmt/format.h>
+#include <nettle/sha2.h>
+#include <toml++/toml.h>
+#include <zlib.h>
+#include <Eigen/Core>
+
+#include "atomic_file.h"
+#include "commands.h"
+#include "field_sampler.h"
+#include "palpa/blob/blob.h"
+#include "palpa/trace/trace.h"
+
+extern char** environ;
+
+namespace palpa::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kExitFailed = 1;              // a replay did not match or broke an invariant
+constexpr double kForceScale = 16777216.0;  // goldens store forces in units of 2^-24 N
+// palpa/servo/servo_loop.h TelemetryFlag: clamped 1, e-stop 2, ramp 4, overrun 8, GPIO error 16.
+constexpr std::uint32_t kTelemetryFlagEstop = 1u << 1;
+constexpr std::uint32_t kGoldenFlags = 1u | 2u | 4u | 16u;  // all but overrun (wall-clock, paced only)
+
+// ---------------------------------------------------------------- small helpers
+
+std::string Slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+std::string Sha256Hex(std::string_view bytes) {
+  sha256_ctx ctx;
+  sha256_init(&ctx);
+  sha256_update(&ctx, bytes.size(), reinterpret_cast<const std::uint8_t*>(bytes.data()));
+  std::uint8_t digest[SHA256_DIGEST_SIZE];
+  sha256_digest(&ctx, SHA256_DIGEST_SIZE, digest);
+  std::string hex;
+  for (const std::uint8_t b : digest) hex += fmt::format("{:02x}", b);
+  return hex;
+}
+
+// `s` as a JSON string literal.
+std::string Json(std::string_view s) {
+  std::string out = "\"";
+  for (const char ch : s) {
+    const auto u = static_cast<unsigned char>(ch);
+    if (ch == '"' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (u < 0x20) {
+      out += fmt::format("\\u{:04x}", u);
+    } else {
+      out += ch;
+    }
+  }
+  return out + "\"";
+}
+
+std::vector<std::string> SplitWords(std::string_view s) {
+  std::vector<std::string> out;
+  std::istringstream in{std::string(s)};
+  for (std::string w; in >> w;) out.push_back(w);
+  return out;
+}
+
+std::string Replace(std::string s, std::string_view what, const std::string& with) {
+  for (std::size_t p = s.find(what); p != std::string::npos; p = s.find(what, p + with.size()))
+    s.replace(p, what.size(), with);
+  return s;
+}
+
+std::string Join(const std::vector<std::string>& v, std::string_view sep = " ") {
+  std::string out;
+  for (const auto& s : v) out += (out.empty() ? "" : std::string(sep)) + s;
+  return out;
+}
+
+bool WriteText(const fs::path& p, std::string_view text, std::string& error) {
+  auto w = WriteFileAtomically(p.string(), std::as_bytes(std::span(text.data(), text.size())));
+  if (!w) error = w.error();
+  return w.has_value();
+}
+
+// Runs argv with stdout/stderr to files; returns the exit status (128+signal, −1 if not started).
+int Spawn(const std::vector<std::string>& argv, const fs::path& out, const fs::path& err, const fs::path& cwd) {
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&fa, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addchdir_np(&fa, cwd.c_str());
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = 0;
+  const int rc = posix_spawnp(&pid, args[0], &fa, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) return -1;
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
+  return -1;
+}
+
+fs::path SelfExe() {
+  std::error_code ec;
+  auto p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path() : p;
+}
+
+// ---------------------------------------------------------------- cases
+
+struct FieldSpec {
+  std::vector<std::string> prepare;  // palpa commands run first ({work} substituted)
+  std::string build;                 // palpa build ... (without -o)
+};
+
+struct Limits {
+  double phi_tolerance_voxels = 0.26;  // proxy never inside: φ(proxy) ≥ −this (δ = 0.25 voxel + rounding)
+  double slope_factor = 2.0;           // |Δf| ≤ factor·k·max|ΔX_h| + slope_floor_n per tick
+  double slope_floor_n = 0.01;
+  double energy_tolerance_j = 1e-6;  // passivity: E_n ≥ −B_n − this
+};
+
+struct Case {
+  std::string name, trace, field, device, why;
+  std::vector<std::string> palpad;  // extra palpad arguments
+  int expect_exit = 0;
+  std::optional<std::array<double, 3>> sphere_centre_m;
+  double sphere_radius_m = 0;
+  std::optional<double> validate_rms_pct, validate_angle_deg;
+  bool realtime = true;  // also replayed by --realtime
+  // Known failures (substrings of failure sentences), each with its reason in cases.toml: reported
+  // as "known", not counted; one that no longer occurs is reported so that it gets removed.
+  std::vector<std::string> xfail;
+};
+
+struct Suite {
+  fs::path root, hil_dir, cases_path;
+  double rate_hz = 1000, k_n_per_m = 800, max_force_n = 8;
+  Limits limits;
+  std::map<std::string, FieldSpec> fields;
+  std::vector<Case> cases;
+};
+
+std::expected<Suite, std::string> LoadSuite(const fs::path& cases_path) {
+  Suite s;
+  s.cases_path = fs::absolute(cases_path);
+  s.hil_dir = s.cases_path.parent_path();
+  s.root = s.hil_dir.parent_path();
+  toml::table t;
+  try {
+    t = toml::parse_file(s.cases_path.string());
+  } catch (const toml::parse_error& e) {
+    return std::unexpected(fmt::format("{}:{}:{}: {}", s.cases_path.string(), e.source().begin.line,
+                                       e.source().begin.column, e.description()));
+  }
+  auto where = [&](const toml::node& n) { return fmt::format("{}:{}", s.cases_path.string(), n.source().begin.line); };
+  if (auto* d = t["defaults"].as_table()) {
+    s.rate_hz = (*d)["rate_hz"].value_or(s.rate_hz);
+    s.k_n_per_m = (*d)["k_n_per_m"].value_or(s.k_n_per_m);
+    s.max_force_n = (*d)["max_force_n"].value_or(s.max_force_n);
+    s.limits.phi_tolerance_voxels = (*d)["phi_tolerance_voxels"].value_or(s.limits.phi_tolerance_voxels);
+    s.limits.slope_factor = (*d)["slope_factor"].value_or(s.limits.slope_factor);
+    s.limits.slope_floor_n = (*d)["slope_floor_n"].value_or(s.limits.slope_floor_n);
+    s.limits.energy_tolerance_j = (*d)["energy_tolerance_j"].value_or(s.limits.energy_tolerance_j);
+  }
+  auto* fields = t["fields"].as_table();
+  if (fields == nullptr) return std::unexpected(s.cases_path.string() + ": no [fields] table");
+  for (auto&& [key, node] : *fields) {
+    auto* ft = node.as_table();
+    if (ft == nullptr) return std::unexpected(where(node) + ": fields." + std::string(key.str()) + " is not a table");
+    FieldSpec f;
+    auto build = (*ft)["build"].value<std::string>();
+    if (!build || !build->starts_with("build "))
+      return std::unexpected(where(node) + ": fields." + std::string(key.str()) + ".build must be 'build POINTS ...'");
+    f.build = *build;
+    if (auto* prep = (*ft)["prepare"].as_array())
+      for (auto&& p : *prep)
+        if (auto v = p.value<std::string>()) f.prepare.push_back(*v);
+    s.fields[std::string(key.str())] = f;
+  }
+  auto* cases = t["case"].as_array();
+  if (cases == nullptr) return std::unexpected(s.cases_path.string() + ": no [[case]] entries");
+  for (auto&& node : *cases) {
+    auto* ct = node.as_table();
+    if (ct == nullptr) return std::unexpected(where(node) + ": [[case]] is not a table");
+    Case c;
+    c.name = (*ct)["name"].value_or(std::string());
+    c.trace = (*ct)["trace"].value_or(std::string());
+    c.field = (*ct)["field"].value_or(std::string());
+    c.device = (*ct)["device"].value_or(std::string("sim"));
+    c.why = (*ct)["why"].value_or(std::string());
+    c.expect_exit = (*ct)["expect_exit"].value_or(0);
+    c.realtime = (*ct)["realtime"].value_or(true);
+    if (c.name.empty() || c.trace.empty() || c.field.empty())
+      return std::unexpected(where(node) + ": a case needs name, trace and field");
+    // Errors about a key name the key's own line.
+    auto at = [&](const char* key) {
+      const toml::node* n = ct->get(key);
+      return where(n != nullptr ? *n : node);
+    };
+    if (!s.fields.contains(c.field)) return std::unexpected(at("field") + ": unknown field '" + c.field + "'");
+    if (c.device != "sim" && c.device != "virtual-falcon")
+      return std::unexpected(at("device") + ": device must be sim or virtual-falcon");
+    if (c.why.empty()) return std::unexpected(where(node) + ": case " + c.name + " must say why (its device choice)");
+    if (auto* xf = (*ct)["xfail"].as_array())
+      for (auto&& a : *xf)
+        if (auto v = a.value<std::string>()) c.xfail.push_back(*v);
+    if (auto* args = (*ct)["palpad"].as_array())
+      for (auto&& a : *args)
+        if (auto v = a.value<std::string>()) c.palpad.push_back(*v);
+    if (auto* sph = (*ct)["sphere"].as_table()) {
+      auto* centre = (*sph)["centre_m"].as_array();
+      if (centre == nullptr || centre->size() != 3)
+        return std::unexpected(where(node) + ": sphere.centre_m needs 3 numbers");
+      c.sphere_centre_m =
+          std::array<double, 3>{(*centre)[0].value_or(0.0), (*centre)[1].value_or(0.0), (*centre)[2].value_or(0.0)};
+      c.sphere_radius_m = (*sph)["radius_m"].value_or(0.0);
+      if (auto v = (*sph)["validate_rms_pct"].value<double>()) c.validate_rms_pct = *v;
+      if (auto v = (*sph)["validate_angle_deg"].value<double>()) c.validate_angle_deg = *v;
+    }
+    for (const auto& other : s.cases)
+      if (other.name == c.name) return std::unexpected(where(node) + ": duplicate case name " + c.name);
+    s.cases.push_back(std::move(c));
+  }
+  return s;
+}
+
+std::optional<fs::path> FindCases() {
+  for (fs::path dir : {fs::current_path(), SelfExe().parent_path()}) {
+    for (; !dir.empty(); dir = dir.parent_path()) {
+      if (fs::exists(dir / "hil" / "cases.toml")) return dir / "hil" / "cases.toml";
+      if (dir == dir.root_path()) break;
+    }
+  }
+  return std::nullopt;
+}
+
+// ---------------------------------------------------------------- one replay's output
+
+struct Tick {
+  double t_s = 0;
+  std::array<double, 3> hip{}, proxy{}, force{};
+  bool contact = false;
+  std::array<std::int32_t, 3> force_q24{};  // force in 2^-24 N
+  std::uint16_t row_hash = 0;               // FNV-1a of the row text, folded
+  std::uint8_t flags = 0;                   // telemetry flags that are deterministic (kGoldenFlags)
+};
+
+std::uint16_t RowHash(std::string_view line) {
+  std::uint32_t h = 2166136261u;
+  for (const char c : line) h = (h ^ static_cast<std::uint8_t>(c)) * 16777619u;
+  return static_cast<std::uint16_t>(h ^ (h >> 16));
+}
+
+std::expected<std::vector<Tick>, std::string> ParseOutput(const std::string& csv, const std::string& name) {
+  std::vector<Tick> ticks;
+  std::size_t pos = csv.find('\n');
+  if (pos == std::string::npos) return ticks;
+  ++pos;
+  std::size_t line_no = 1;
+  while (pos < csv.size()) {
+    std::size_t end = csv.find('\n', pos);
+    if (end == std::string::npos) end = csv.size();
+    const std::string_view line(csv.data() + pos, end - pos);
+    pos = end + 1;
+    ++line_no;
+    if (line.empty()) continue;
+    double v[11];
+    const char* p = line.data();
+    for (int i = 0; i < 11; ++i) {
+      char* next = nullptr;
+      v[i] = std::strtod(p, &next);
+      if (next == p) return std::unexpected(fmt::format("{}:{}: not a palpad output row", name, line_no));
+      p = next + (i < 10 ? 1 : 0);
+    }
+    Tick t;
+    t.t_s = v[0];
+    for (std::size_t k = 0; k < 3; ++k) {
+      t.hip[k] = v[1 + k];
+      t.proxy[k] = v[4 + k];
+      t.force[k] = v[7 + k];
+      t.force_q24[k] = static_cast<std::int32_t>(std::llround(v[7 + k] * kForceScale));
+    }
+    t.contact = v[10] != 0;
+    t.row_hash = RowHash(line);
+    ticks.push_back(t);
+  }
+  return ticks;
+}
+
+// Golden per-tick stream: per tick zigzag-varint deltas of the three forces (2^-24 N), a
+// contact byte and the 16-bit row hash; gzip-compressed.
+std::string RawTicks(const std::vector<Tick>& ticks) {
+  std::string raw;
+  std::array<std::int64_t, 3> prev{};
+  auto varint = [&](std::uint64_t u) {
+    while (u >= 0x80) {
+      raw += static_cast<char>((u & 0x7F) | 0x80);
+      u >>= 7;
+    }
+    raw += static_cast<char>(u);
+  };
+  for (const Tick& t : ticks) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::int64_t d = t.force_q24[k] - prev[k];
+      prev[k] = t.force_q24[k];
+      varint((static_cast<std::uint64_t>(d) << 1) ^ static_cast<std::uint64_t>(d >> 63));
+    }
+    raw += static_cast<char>(t.contact ? 1 : 0);
+    raw += static_cast<char>(t.flags);
+    raw += static_cast<char>(t.row_hash & 0xFF);
+    raw += static_cast<char>(t.row_hash >> 8);
+  }
+  return raw;
+}
+
+std::string EncodeTicks(const std::vector<Tick>& ticks) {
+  std::string raw = RawTicks(ticks);
+  z_stream z{};
+  deflateInit2(&z, 9, Z_DEFLATED, 15 + 16, 9, Z_DEFAULT_STRATEGY);  // gzip wrapper, mtime 0
+  std::string out(deflateBound(&z, static_cast<uLong>(raw.size())) + 32, '\0');
+  z.next_in = reinterpret_cast<Bytef*>(raw.data());
+  z.avail_in = static_cast<uInt>(raw.size());
+  z.next_out = reinterpret_cast<Bytef*>(out.data());
+  z.avail_out = static_cast<uInt>(out.size());
+  deflate(&z, Z_FINISH);
+  out.resize(z.total_out);
+  deflateEnd(&z);
+  return out;
+}
+
+std::expected<std::vector<Tick>, std::string> DecodeTicks(const std::string& gz, std::size_t count) {
+  std::string raw;
+  z_stream z{};
+  inflateInit2(&z, 15 + 16);
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(gz.data()));
+  z.avail_in = static_cast<uInt>(gz.size());
+  char buf[65536];
+  int rc = Z_OK;
+  while (rc == Z_OK) {
+    z.next_out = reinterpret_cast<Bytef*>(buf);
+    z.avail_out = sizeof buf;
+    rc = inflate(&z, Z_NO_FLUSH);
+    raw.append(buf, sizeof buf - z.avail_out);
+  }
+  inflateEnd(&z);
+  if (rc != Z_STREAM_END) return std::unexpected("corrupt golden tick stream (gzip)");
+  std::vector<Tick> ticks;
+  std::array<std::int64_t, 3> prev{};
+  std::size_t at = 0;
+  auto varint = [&](std::uint64_t& u) {
+    u = 0;
+    for (int shift = 0; at < raw.size() && shift < 64; shift += 7) {
+      const auto b = static_cast<std::uint8_t>(raw[at++]);
+      u |= static_cast<std::uint64_t>(b & 0x7F) << shift;
+      if ((b & 0x80) == 0) return true;
+    }
+    return false;
+  };
+  for (std::size_t i = 0; i < count; ++i) {
+    Tick t;
+    for (std::size_t k = 0; k < 3; ++k) {
+      std::uint64_t u = 0;
+      if (!varint(u)) return std::unexpected("golden tick stream ends early");
+      const auto d = static_cast<std::int64_t>(u >> 1) ^ -static_cast<std::int64_t>(u & 1);
+      prev[k] += d;
+      t.force_q24[k] = static_cast<std::int32_t>(prev[k]);
+      t.force[k] = static_cast<double>(prev[k]) / kForceScale;
+    }
+    if (at + 4 > raw.size()) return std::unexpected("golden tick stream ends early");
+    t.contact = raw[at] != 0;
+    t.flags = static_cast<std::uint8_t>(raw[at + 1]);
+    t.row_hash = static_cast<std::uint16_t>(static_cast<std::uint8_t>(raw[at + 2]) |
+                                            (static_cast<std::uint8_t>(raw[at + 3]) << 8));
+    at += 4;
+    ticks.push_back(t);
+  }
+  return ticks;
+}
+
+// ---------------------------------------------------------------- timing (palpad --record-timing)
+
+struct TimingRow {
+  std::int64_t wake_ns = -1, compute_ns = 0, total_ns = 0;
+  std::uint32_t flags = 0;
+};
+
+std::vector<TimingRow> ReadTiming(const fs::path& p) {
+  std::vector<TimingRow> rows;
+  std::ifstream in(p);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    unsigned long long tick = 0;
+    double t = 0;
+    long long w = 0, c = 0, tot = 0;
+    unsigned flags = 0;
+    if (std::sscanf(line.c_str(), "%llu,%lf,%lld,%lld,%lld,%u", &tick, &t, &w, &c, &tot, &flags) == 6)
+      rows.push_back({w, c, tot, flags});
+  }
+  return rows;
+}
+
+struct Percentiles {
+  std::size_t count = 0;
+  double p50 = 0, p99 = 0, p999 = 0, max = 0;  // µs
+};
+
+Percentiles Figures(std::vector<std::int64_t> ns) {
+  Percentiles p;
+  std::erase_if(ns, [](std::int64_t v) { return v < 0; });
+  if (ns.empty()) return p;
+  std::sort(ns.begin(), ns.end());
+  auto rank = [&](double q) {  // nearest rank
+    const auto r = static_cast<std::size_t>(std::ceil(q * static_cast<double>(ns.size())));
+    return static_cast<double>(ns[std::min(ns.size(), std::max<std::size_t>(r, 1)) - 1]) / 1e3;
+  };
+  p.count = ns.size();
+  p.p50 = rank(0.5);
+  p.p99 = rank(0.99);
+  p.p999 = rank(0.999);
+  p.max = static_cast<double>(ns.back()) / 1e3;
+  return p;
+}
+
+// ---------------------------------------------------------------- metrics
+
+struct Metrics {
+  std::size_t ticks = 0, contact_ticks = 0;
+  double max_force_n = 0, max_slope_n = 0, slope_limit_n = 0, min_proxy_phi_voxels = 1e9;
+  double energy_j = 0, min_passivity_margin_j = 0;
+  double max_hip_step_m = 0;
+  // Sphere (analytic) validation, when the case has one.
+  bool analytic = false;
+  double peak_analytic_n = 0, rms_error_n = 0, rms_error_pct = 0, rms_angle_deg = 0, max_angle_deg = 0;
+  std::size_t angle_ticks = 0;
+  std::vector<std::string> failures;  // invariant and validation failures, one sentence each
+};
+
+Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSampler& field, double k, double max_force,
+                const Limits& lim) {
+  Metrics m;
+  m.ticks = ticks.size();
+  const double voxel = field.voxel_m();
+  for (std::size_t i = 1; i < ticks.size(); ++i) {
+    const Eigen::Vector3d d(ticks[i].hip[0] - ticks[i - 1].hip[0], ticks[i].hip[1] - ticks[i - 1].hip[1],
+                            ticks[i].hip[2] - ticks[i - 1].hip[2]);
+    m.max_hip_step_m = std::max(m.max_hip_step_m, d.norm());
+  }
+  m.slope_limit_n = lim.slope_factor * k * m.max_hip_step_m + lim.slope_floor_n;
+  double energy = 0, bound = 0;
+  std::size_t worst_phi_tick = 0, worst_slope_tick = 0;
+  for (std::size_t i = 0; i < ticks.size(); ++i) {
+    const Tick& t = ticks[i];
+    const Eigen::Vector3d f(t.force[0], t.force[1], t.force[2]);
+    const Eigen::Vector3d proxy(t.proxy[0], t.proxy[1], t.proxy[2]);
+    m.contact_ticks += t.contact ? 1 : 0;
+    m.max_force_n = std::max(m.max_force_n, f.norm());
+    const double phi_voxels = field.Phi(proxy) / voxel;
+    if (phi_voxels < m.min_proxy_phi_voxels) {
+      m.min_proxy_phi_voxels = phi_voxels;
+      worst_phi_tick = i;
+    }
+    if (i > 0) {
+      const Tick& p = ticks[i - 1];
+      const double slope =
+          Eigen::Vector3d(t.force[0] - p.force[0], t.force[1] - p.force[1], t.force[2] - p.force[2]).norm();
+      if (slope > m.max_slope_n) {
+        m.max_slope_n = slope;
+        worst_slope_tick = i;
+      }
+      // Passivity observer (Hannaford & Ryu 2002), zero-order hold: E_n = −Σ f_m·(x_{m+1} − x_m);
+      // a sampled spring may return at most B_n = k/2 Σ|Δu|², u = X_h − X_p (docs/realtime-core.md).
+      double work = 0, du2 = 0;
+      for (std::size_t a = 0; a < 3; ++a) {
+        work += p.force[a] * (t.hip[a] - p.hip[a]);
+        // u is the spring that produced the force: zero on ticks without contact (as proxy::PassivityObserver).
+        const double du = (t.contact ? t.hip[a] - t.proxy[a] : 0.0) - (p.contact ? p.hip[a] - p.proxy[a] : 0.0);
+        du2 += du * du;
+      }
+      energy -= work;
+      bound += 0.5 * k * du2;
+      m.min_passivity_margin_j = std::min(m.min_passivity_margin_j, energy + bound);
+    }
+  }
+  m.energy_j = energy;
+  if (m.max_force_n > max_force + 1e-4)
+    m.failures.push_back(fmt::format("force {:.6f} N exceeds the clamp {} N", m.max_force_n, max_force));
+  if (m.min_proxy_phi_voxels < -lim.phi_tolerance_voxels)
+    m.failures.push_back(fmt::format("proxy inside the object at tick {}: φ = {:.4f} voxel < −{} voxel", worst_phi_tick,
+                                     m.min_proxy_phi_voxels, lim.phi_tolerance_voxels));
+  if (m.max_slope_n > m.slope_limit_n)
+    m.failures.push_back(fmt::format("force step {:.4f} N at tick {} exceeds the slope limit {:.4f} N/tick",
+                                     m.max_slope_n, worst_slope_tick, m.slope_limit_n));
+  if (m.min_passivity_margin_j < -lim.energy_tolerance_j)
+    m.failures.push_back(fmt::format("passivity observer: energy fell {:.3g} J below the sampled-spring bound",
+                                     -m.min_passivity_margin_j));
+
+  if (c.sphere_centre_m) {
+    m.analytic = true;
+    const Eigen::Vector3d centre((*c.sphere_centre_m)[0], (*c.sphere_centre_m)[1], (*c.sphere_centre_m)[2]);
+    std::vector<double> fa(ticks.size());
+    for (std::size_t i = 0; i < ticks.size(); ++i) {
+      const Eigen::Vector3d h(ticks[i].hip[0], ticks[i].hip[1], ticks[i].hip[2]);
+      fa[i] = std::min(k * std::max(0.0, c.sphere_radius_m - (h - centre).norm()), max_force);
+      m.peak_analytic_n = std::max(m.peak_analytic_n, fa[i]);
+    }
+    double se = 0, sa = 0;
+    for (std::size_t i = 0; i < ticks.size(); ++i) {
+      const Eigen::Vector3d f(ticks[i].force[0], ticks[i].force[1], ticks[i].force[2]);
+      se += (f.norm() - fa[i]) * (f.norm() - fa[i]);
+      if (fa[i] >= 0.1 * m.peak_analytic_n && f.norm() > 0) {
+        const Eigen::Vector3d h(ticks[i].hip[0], ticks[i].hip[1], ticks[i].hip[2]);
+        const Eigen::Vector3d n = (h - centre).normalized();
+        const double angle = std::acos(std::clamp(f.normalized().dot(n), -1.0, 1.0)) * 180.0 / M_PI;
+        sa += angle * angle;
+        m.max_angle_deg = std::max(m.max_angle_deg, angle);
+        ++m.angle_ticks;
+      }
+    }
+    m.rms_error_n = ticks.empty() ? 0 : std::sqrt(se / static_cast<double>(ticks.size()));
+    m.rms_error_pct = m.peak_analytic_n > 0 ? 100 * m.rms_error_n / m.peak_analytic_n : 0;
+    m.rms_angle_deg = m.angle_ticks > 0 ? std::sqrt(sa / static_cast<double>(m.angle_ticks)) : 0;
+    if (c.validate_rms_pct && !(m.rms_error_pct <= *c.validate_rms_pct))
+      m.failures.push_back(fmt::format("Fig. 9 validation: force RMS error {:.3f} % of peak > {} %", m.rms_error_pct,
+                                       *c.validate_rms_pct));
+    if (c.validate_angle_deg && !(m.rms_angle_deg <= *c.validate_angle_deg))
+      m.failures.push_back(
+          fmt::format("Fig. 9 validation: direction RMS error {:.3f}° > {}°", m.rms_angle_deg, *c.validate_angle_deg));
+  }
+  return m;
+}
+
+// Per-tick series for the report: t_s, |f|, analytic |f| (sphere; empty otherwise), spring
+// |X_h − X_p|, φ(HIP), φ(proxy), analytic HIP depth — metres and newtons.
+std::string SeriesCsv(const std::vector<Tick>& ticks, const Case& c, const FieldSampler& field, double k,
+                      double max_force) {
+  std::string out = "t_s,force_n,analytic_n,spring_m,phi_hip_m,phi_proxy_m,analytic_depth_m\n";
+  for (const Tick& t : ticks) {
+    const Eigen::Vector3d h(t.hip[0], t.hip[1], t.hip[2]), p(t.proxy[0], t.proxy[1], t.proxy[2]);
+    const Eigen::Vector3d f(t.force[0], t.force[1], t.force[2]);
+    std::string analytic = ",", depth;
+    if (c.sphere_centre_m) {
+      const Eigen::Vector3d centre((*c.sphere_centre_m)[0], (*c.sphere_centre_m)[1], (*c.sphere_centre_m)[2]);
+      const double d = c.sphere_radius_m - (h - centre).norm();
+      analytic = fmt::format("{:.9g},", std::min(k * std::max(0.0, d), max_force));
+      depth = fmt::format("{:.9g}", std::max(0.0, d));
+    }
+    out += fmt::format("{:.9g},{:.9g},{}{:.9g},{:.9g},{:.9g},{}\n", t.t_s, f.norm(), analytic, (h - p).norm(),
+                       field.Phi(h), field.Phi(p), depth);
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------- the harness
+
+struct Context {
+  Suite suite;
+  HilArgs args;
+  fs::path palpa, palpad, work, goldens;
+  double k = 800, max_force = 8, rate = 1000;
+};
+
+std::string FileStamp(const fs::path& p) {
+  struct stat st {};
+  if (stat(p.c_str(), &st) != 0) return "missing";
+  return fmt::format("{}:{}.{}", st.st_size, st.st_mtim.tv_sec, st.st_mtim.tv_nsec);
+}
+
+// Builds (or reuses) the field; returns its path.
+std::expected<fs::path, std::string> EnsureField(const Context& cx, const std::string& name) {
+  const FieldSpec& spec = cx.suite.fields.at(name);
+  const fs::path dir = cx.work / "fields";
+  fs::create_directories(dir);
+  const fs::path blob = dir / (name + ".palpa");
+  const std::string work = cx.work.string();
+  std::vector<std::vector<std::string>> commands;
+  for (const auto& p : spec.prepare) commands.push_back(SplitWords(Replace(p, "{work}", work)));
+  auto build = SplitWords(Replace(spec.build, "{work}", work));
+  build.insert(build.end(), {"-o", blob.string(), "-q"});
+  commands.push_back(build);
+  std::string stamp = "palpa " + FileStamp(cx.palpa) + "\n";
+  for (const auto& c : commands) stamp += Join(c) + "\n";
+  const fs::path stamp_path = dir / (name + ".stamp");
+  if (fs::exists(blob) && Slurp(stamp_path) == stamp) return blob;
+  for (auto c : commands) {
+    c.insert(c.begin(), cx.palpa.string());
+    const int rc = Spawn(c, dir / (name + ".log"), dir / (name + ".err"), cx.suite.root);
+    if (rc != 0)
+      return std::unexpected(
+          fmt::format("field {}: `{}` failed (exit {}): {}", name, Join(c), rc, Slurp(dir / (name + ".err"))));
+  }
+  std::string error;
+  if (!WriteText(stamp_path, stamp, error)) return std::unexpected(error);
+  return blob;
+}
+
+struct Replay {
+  int exit_code = -1;
+  std::string csv;
+  std::vector<Tick> ticks;
+  std::string summary_json, stderr_text, device_report;
+  double wall_s = 0;
+  fs::path dir;
+};
+
+std::vector<std::string> PalpadArgv(const Context& cx, const Case& c, const fs::path& field, const fs::path& out,
+                                    const fs::path& summary, bool fast) {
+  std::vector<std::string> argv = cx.args.emulator;
+  argv.push_back(cx.palpad.string());
+  const std::vector<std::string> rest = {"--device",
+                                         c.device,
+                                         "--field",
+                                         field.string(),
+                                         "--trace",
+                                         (cx.suite.hil_dir / c.trace).string(),
+                                         "--out",
+                                         out.string(),
+                                         "--summary-json",
+                                         summary.string(),
+                                         "--rate",
+                                         fmt::format("{}", cx.rate),
+                                         "--k",
+                                         fmt::format("{}", cx.k),
+                                         "--max-force",
+                                         fmt::format("{}", cx.max_force)};
+  argv.insert(argv.end(), rest.begin(), rest.end());
+  if (fast) argv.push_back("--fast");
+  // Per-tick timing (and, paced, the HIP recording) leave palpad through its telemetry ring.
+  argv.insert(argv.end(), {"--record-timing", (out.parent_path() / "timing.csv").string()});
+  if (!fast) argv.insert(argv.end(), {"--record", (out.parent_path() / "recorded.ptb").string()});
+  argv.insert(argv.end(), c.palpad.begin(), c.palpad.end());
+  return argv;
+}
+
+std::expected<Replay, std::string> RunReplay(const Context& cx, const Case& c, const fs::path& field, bool fast) {
+  Replay r;
+  r.dir = cx.work / "results" / (fast ? "fast" : "realtime") / c.name;
+  fs::create_directories(r.dir);
+  for (const char* f : {"out.csv", "summary.json", "timing.csv", "recorded.ptb"}) fs::remove(r.dir / f);
+  const auto argv = PalpadArgv(cx, c, field, r.dir / "out.csv", r.dir / "summary.json", fast);
+  {
+    std::string error;
+    if (!WriteText(r.dir / "command.txt", Join(argv) + "\n", error)) return std::unexpected(error);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  r.exit_code = Spawn(argv, r.dir / "stdout.txt", r.dir / "stderr.txt", cx.suite.root);
+  r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (r.exit_code < 0) return std::unexpected("cannot start " + argv.front());
+  r.csv = Slurp(r.dir / "out.csv");
+  r.summary_json = Slurp(r.dir / "summary.json");
+  r.stderr_text = Slurp(r.dir / "stderr.txt");
+  // The Falcon driver's end-of-run counters run on the virtual Falcon's simulated clock: part of
+  // the deterministic output.
+  std::istringstream lines(r.stderr_text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.starts_with("palpad: falcon:") || line.starts_with("palpad: virtual falcon:") ||
+        line.find("Falcon") != std::string::npos)
+      r.device_report += line + "\n";
+  auto ticks = ParseOutput(r.csv, (r.dir / "out.csv").string());
+  if (!ticks) return std::unexpected(ticks.error());
+  r.ticks = std::move(*ticks);
+  return r;
+}
+
+// Integer counters from the summary JSON (timing fields are not deterministic and are left out).
+std::map<std::string, std::string> Counters(const std::string& json) {
+  std::map<std::string, std::string> out;
+  for (const char* key : {"ticks", "contact_ticks", "force_clamps", "device_errors", "dropped_rows", "estop_events",
+                          "estop_ticks", "gpio_errors", "end", "fault"}) {
+    const std::string k = std::string("\"") + key + "\": ";
+    const auto p = json.find(k);
+    if (p == std::string::npos) continue;
+    auto v = json.substr(p + k.size());
+    v = v.substr(0, v.find_first_of(",}"));
+    if (!v.empty() && v.front() == '"') v = v.substr(1, v.size() - 2);
+    out[key] = v;
+  }
+  return out;
+}
+
+struct Golden {
+  std::string csv_sha256, ticks_sha256;
+  std::size_t ticks = 0;
+  int exit_code = 0;
+  std::map<std::string, std::string> counters;
+  std::string device_report;
+};
+
+std::string GoldenToml(const Context& cx, const Case& c, const Replay& r, const std::string& trace_sha) {
+  toml::table counters;
+  for (const auto& [k, v] : Counters(r.summary_json)) counters.insert(k, v);
+  toml::table t{{"format", "palpa-hil-golden 1"},
+                {"case", c.name},
+                {"trace", c.trace},
+                {"trace_sha256", trace_sha},
+                {"field_build", cx.suite.fields.at(c.field).build},
+                {"device", c.device},
+                {"palpad_args", Join(c.palpad)},
+                {"k_n_per_m", cx.k},
+                {"max_force_n", cx.max_force},
+                {"rate_hz", cx.rate},
+                {"exit_code", r.exit_code},
+                {"ticks", static_cast<std::int64_t>(r.ticks.size())},
+                {"csv_sha256", Sha256Hex(r.csv)},
+                {"ticks_sha256", Sha256Hex(RawTicks(r.ticks))},
+                {"counters", counters},
+                {"device_report", r.device_report}};
+  std::ostringstream out;
+  out << "# HIL golden for case " << c.name << " (palpa hil bless " << c.name << "); do not edit by hand.\n"
+      << "# Per-tick forces, contact and row hashes: " << c.name << ".ticks.gz (docs/hil.md).\n"
+      << t << "\n";
+  return out.str();
+}
+
+std::expected<Golden, std::string> ReadGolden(const Context& cx, const Case& c) {
+  const fs::path p = cx.goldens / (c.name + ".toml");
+  if (!fs::exists(p)) return std::unexpected("no golden " + p.string() + " (bless it: palpa hil bless " + c.name + ")");
+  toml::table t;
+  try {
+    t = toml::parse_file(p.string());
+  } catch (const toml::parse_error& e) {
+    return std::unexpected(fmt::format("{}:{}: {}", p.string(), e.source().begin.line, e.description()));
+  }
+  Golden g;
+  g.csv_sha256 = t["csv_sha256"].value_or(std::string());
+  g.ticks_sha256 = t["ticks_sha256"].value_or(std::string());
+  g.ticks = static_cast<std::size_t>(t["ticks"].value_or(std::int64_t{0}));
+  g.exit_code = static_cast<int>(t["exit_code"].value_or(std::int64_t{0}));
+  g.device_report = t["device_report"].value_or(std::string());
+  if (auto* cs = t["counters"].as_table())
+    for (auto&& [k, v] : *cs) g.counters[std::string(k.str())] = v.value_or(std::string());
+  return g;
+}
+
+// What changed between the golden and a replay, in one paragraph.
+std::string Differences(const Context& cx, const Case& c, const Golden& g, const Replay& r) {
+  std::string out;
+  if (g.exit_code != r.exit_code) out += fmt::format("    exit code {} (golden {})\n", r.exit_code, g.exit_code);
+  if (g.ticks != r.ticks.size()) out += fmt::format("    ticks {} (golden {})\n", r.ticks.size(), g.ticks);
+  const auto counters = Counters(r.summary_json);
+  for (const auto& [k, v] : g.counters) {
+    auto it = counters.find(k);
+    const std::string now = it == counters.end() ? "(missing)" : it->second;
+    if (now != v) out += fmt::format("    {} {} (golden {})\n", k, now, v);
+  }
+  if (g.device_report != r.device_report)
+    out += fmt::format("    device report:\n      now:    {}\n      golden: {}\n", Replace(r.device_report, "\n", " "),
+                       Replace(g.device_report, "\n", " "));
+  auto gt = DecodeTicks(Slurp(cx.goldens / (c.name + ".ticks.gz")), g.ticks);
+  if (!gt) return out + "    " + gt.error() + "\n";
+  std::size_t changed = 0, force_changed = 0, first = SIZE_MAX;
+  double max_df = 0;
+  std::size_t max_df_tick = 0;
+  const std::size_t n = std::min(gt->size(), r.ticks.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const Tick& a = (*gt)[i];
+    const Tick& b = r.ticks[i];
+    const bool f_diff = a.force_q24 != b.force_q24;
+    if (f_diff || a.row_hash != b.row_hash || a.contact != b.contact || a.flags != b.flags) {
+      ++changed;
+      first = std::min(first, i);
+    }
+    if (f_diff) {
+      ++force_changed;
+      const double df = std::hypot(a.force[0] - b.force[0], a.force[1] - b.force[1], a.force[2] - b.force[2]);
+      if (df > max_df) {
+        max_df = df;
+        max_df_tick = i;
+      }
+    }
+  }
+  changed += std::max(gt->size(), r.ticks.size()) - n;
+  out += fmt::format(
+      "    ticks changed: {} of {} (forces on {}), first at tick {}; max force difference {:.6g} N at tick {}\n",
+      changed, std::max(gt->size(), r.ticks.size()), force_changed,
+      first == SIZE_MAX ? std::string("-") : std::to_string(first), max_df, max_df_tick);
+  return out;
+}
+
+std::string MetricsJson(const Case& c, const Replay& r, const Metrics& m, const Context& cx, bool fast,
+                        const std::string& verdict, const std::string& extra) {
+  std::string j = "{";
+  j += fmt::format("\"case\": \"{}\", \"mode\": \"{}\", \"device\": \"{}\", \"field\": \"{}\", \"trace\": \"{}\", ",
+                   c.name, fast ? "fast" : "realtime", c.device, c.field, c.trace);
+  j += "\"why\": " + Json(c.why) + ", ";
+  j += fmt::format("\"k_n_per_m\": {}, \"max_force_n\": {}, \"rate_hz\": {}, ", cx.k, cx.max_force, cx.rate);
+  j += fmt::format("\"exit_code\": {}, \"wall_s\": {:.3f}, \"ticks\": {}, \"contact_ticks\": {}, ", r.exit_code,
+                   r.wall_s, m.ticks, m.contact_ticks);
+  j += fmt::format("\"max_force_n_seen\": {:.9g}, \"max_slope_n\": {:.9g}, \"slope_limit_n\": {:.9g}, ", m.max_force_n,
+                   m.max_slope_n, m.slope_limit_n);
+  j += fmt::format("\"min_proxy_phi_voxels\": {:.6f}, \"energy_j\": {:.9g}, \"min_passivity_margin_j\": {:.9g}, ",
+                   m.min_proxy_phi_voxels, m.energy_j, m.min_passivity_margin_j);
+  if (m.analytic)
+    j += fmt::format(
+        "\"analytic\": {{\"kind\": \"sphere\", \"centre_m\": [{}, {}, {}], \"radius_m\": {}, \"peak_n\": {:.9g}, "
+        "\"rms_error_n\": {:.9g}, \"rms_error_pct\": {:.6f}, \"rms_angle_deg\": {:.6f}, \"max_angle_deg\": {:.6f}, "
+        "\"angle_ticks\": {}}}, ",
+        (*c.sphere_centre_m)[0], (*c.sphere_centre_m)[1], (*c.sphere_centre_m)[2], c.sphere_radius_m, m.peak_analytic_n,
+        m.rms_error_n, m.rms_error_pct, m.rms_angle_deg, m.max_angle_deg, m.angle_ticks);
+  j += extra;
+  j += "\"failures\": [";
+  std::string fl;
+  for (std::size_t i = 0; i < m.failures.size(); ++i) fl += (i ? ", " : "") + Json(m.failures[i]);
+  j += fl + "], ";
+  j += fmt::format("\"verdict\": \"{}\", \"summary\": {}}}\n", verdict,
+                   r.summary_json.empty() ? std::string("null")
+                                          : r.summary_json.substr(0, r.summary_json.find_last_not_of(" \n") + 1));
+  return j;
+}
+
+struct LoadedField {
+  explicit LoadedField(std::vector<std::byte> b) : bytes(std::move(b)) {}
+  std::vector<std::byte> bytes;
+  blob::FieldView view;
+};
+
+int RunCases(Context& cx, const std::string& action) {
+  const bool fast = cx.args.mode != "realtime";
+  const bool bless = action == "bless";
+  std::vector<const Case*> selected;
+  for (const Case& c : cx.suite.cases) {
+    bool match = cx.args.filter.empty();
+    if (bless && !cx.args.names.empty())
+      match = std::find(cx.args.names.begin(), cx.args.names.end(), c.name) != cx.args.names.end();
+    else if (!cx.args.filter.empty())
+      for (const auto& f : SplitWords(Replace(cx.args.filter, ",", " ")))
+        match = match || c.name.find(f) != std::string::npos;
+    if (!fast && !c.realtime) match = false;
+    if (!cx.args.device.empty() && c.device != cx.args.device) match = false;
+    if (match) selected.push_back(&c);
+  }
+  if (bless && cx.args.names.empty() && !cx.args.all) {
+    fmt::print(stderr, "palpa hil bless: name the cases to bless, or --all\n");
+    return kExitBadInput;
+  }
+  if (bless)
+    for (const auto& n : cx.args.names)
+      if (std::none_of(cx.suite.cases.begin(), cx.suite.cases.end(), [&](const Case& c) { return c.name == n; })) {
+        fmt::print(stderr, "palpa hil bless: no case named '{}' in {}\n", n, cx.suite.cases_path.string());
+        return kExitBadInput;
+      }
+  if (selected.empty()) {
+    fmt::print(stderr, "palpa hil: no case matches '{}'\n", cx.args.filter);
+    return kExitBadInput;
+  }
+  fmt::print("palpa hil {} ({}): {} case(s), palpad {}{}, k {} N/m, max force {} N, rate {} Hz\n", action,
+             fast ? "fast, lockstep" : "realtime, paced", selected.size(), cx.palpad.string(),
+             cx.args.emulator.empty() ? "" : " under " + Join(cx.args.emulator), cx.k, cx.max_force, cx.rate);
+  int failed = 0;
+  std::string index = "[";
+  std::map<std::string, std::unique_ptr<LoadedField>> loaded_fields;
+  std::vector<std::int64_t> all_wake, all_compute, all_total;
+  for (const Case* cp : selected) {
+    const Case& c = *cp;
+    auto field = EnsureField(cx, c.field);
+    if (!field) {
+      fmt::print(stderr, "palpa hil: {}\n", field.error());
+      return kExitBadInput;
+    }
+    const fs::path trace_path = cx.suite.hil_dir / c.trace;
+    if (auto tr = trace::ReadTraceFile(trace_path.string()); !tr) {
+      fmt::print(stderr, "palpa hil: case {}: {}\n", c.name, tr.error().message);
+      return kExitBadInput;
+    }
+    auto replay = RunReplay(cx, c, *field, fast);
+    if (!replay) {
+      fmt::print(stderr, "palpa hil: case {}: {}\n", c.name, replay.error());
+      return kExitBadInput;
+    }
+    // Each field is read and verified once per run (the sphere's is 108 MB).
+    auto& loaded = loaded_fields[c.field];
+    if (!loaded) {
+      auto blob_bytes = blob::ReadFile(field->c_str());
+      if (!blob_bytes) {
+        fmt::print(stderr, "palpa hil: {}\n", blob_bytes.error().what());
+        return kExitBadInput;
+      }
+      loaded = std::make_unique<LoadedField>(std::move(*blob_bytes));
+      auto view = blob::Verify(loaded->bytes);
+      if (!view) {
+        fmt::print(stderr, "palpa hil: {}: {}\n", field->string(), view.error().what());
+        return kExitBadInput;
+      }
+      loaded->view = *view;
+    }
+    const FieldSampler sampler(loaded->view);
+    Metrics m = Measure(replay->ticks, c, sampler, cx.k, cx.max_force, cx.suite.limits);
+    if (replay->exit_code != c.expect_exit)
+      m.failures.push_back(fmt::format("palpad exited {} (expected {}): {}", replay->exit_code, c.expect_exit,
+                                       Replace(replay->stderr_text.substr(0, 400), "\n", " | ")));
+    std::string recorded_note;
+    // Timing and telemetry flags from palpad --record-timing (both modes).
+    const auto timing = ReadTiming(replay->dir / "timing.csv");
+    for (std::size_t i = 0; i < timing.size() && i < replay->ticks.size(); ++i)
+      replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & kGoldenFlags);
+    std::size_t estop_ticks = 0, estop_force_ticks = 0;
+    std::vector<std::int64_t> wake, compute, total;
+    for (std::size_t i = 0; i < timing.size(); ++i) {
+      wake.push_back(timing[i].wake_ns);
+      compute.push_back(timing[i].compute_ns);
+      total.push_back(timing[i].total_ns);
+      if ((timing[i].flags & kTelemetryFlagEstop) != 0 && i < replay->ticks.size()) {
+        ++estop_ticks;
+        const auto& f = replay->ticks[i].force;
+        if (f[0] != 0 || f[1] != 0 || f[2] != 0) ++estop_force_ticks;
+      }
+    }
+    if (estop_force_ticks > 0)
+      m.failures.push_back(
+          fmt::format("e-stop asserted on {} ticks, {} of them with non-zero force", estop_ticks, estop_force_ticks));
+    const Percentiles pw = Figures(wake), pc = Figures(compute), pt = Figures(total);
+    all_wake.insert(all_wake.end(), wake.begin(), wake.end());
+    all_compute.insert(all_compute.end(), compute.begin(), compute.end());
+    all_total.insert(all_total.end(), total.begin(), total.end());
+    // --record (paced runs): the recording must read and hold the HIP the loop saw, tick by tick.
+    if (!fast) {
+      auto rec = trace::ReadTraceFile((replay->dir / "recorded.ptb").string());
+      if (!rec) {
+        m.failures.push_back("--record: " + rec.error().message);
+      } else {
+        const auto dropped = static_cast<std::size_t>(std::max<std::int64_t>(
+            0, static_cast<std::int64_t>(replay->ticks.size()) - static_cast<std::int64_t>(rec->samples.size())));
+        std::size_t off = 0;
+        for (std::size_t i = 0, j = 0; i < rec->samples.size() && j < replay->ticks.size(); ++j) {
+          if (std::abs(rec->samples[i].t_s - replay->ticks[j].t_s) > 1e-9) continue;  // a dropped sample
+          for (std::size_t a = 0; a < 3; ++a)
+            if (std::abs(rec->samples[i].hip_m[a] - replay->ticks[j].hip[a]) > 1e-9) ++off;
+          ++i;
+        }
+        if (off > 0)
+          m.failures.push_back(fmt::format("--record: {} coordinates differ from the HIP the loop read", off));
+        recorded_note = fmt::format("recorded {} of {} HIP samples ({} dropped)", rec->samples.size(),
+                                    replay->ticks.size(), dropped);
+      }
+    }
+    std::vector<std::string> known, gone;
+    for (const auto& x : c.xfail) {
+      const auto it = std::find_if(m.failures.begin(), m.failures.end(),
+                                   [&](const std::string& f) { return f.find(x) != std::string::npos; });
+      if (it == m.failures.end()) {
+        gone.push_back(x);
+      } else {
+        known.push_back(*it);
+        m.failures.erase(it);
+      }
+    }
+    std::string verdict = m.failures.empty() ? "ok" : "FAIL";
+    std::string detail;
+    const std::string trace_sha = Sha256Hex(Slurp(trace_path));
+    if (fast && !bless) {
+      auto g = ReadGolden(cx, c);
+      if (!g) {
+        verdict = "NO GOLDEN";
+        detail = "    " + g.error() + "\n";
+      } else if (g->csv_sha256 != Sha256Hex(replay->csv) || g->ticks_sha256 != Sha256Hex(RawTicks(replay->ticks)) ||
+                 g->exit_code != replay->exit_code || g->device_report != replay->device_report ||
+                 g->counters != Counters(replay->summary_json)) {
+        verdict = "MISMATCH";
+        detail = Differences(cx, c, *g, *replay);
+      }
+    }
+    if (bless) {
+      auto old = ReadGolden(cx, c);
+      std::string error;
+      fs::create_directories(cx.goldens);
+      const std::string gz = EncodeTicks(replay->ticks);
+      std::string what = "new golden";
+      if (old) {
+        if (old->csv_sha256 == Sha256Hex(replay->csv) && old->ticks_sha256 == Sha256Hex(RawTicks(replay->ticks)) &&
+            old->exit_code == replay->exit_code && old->device_report == replay->device_report &&
+            old->counters == Counters(replay->summary_json))
+          what = "unchanged";
+        else
+          what = "changed:\n" + Differences(cx, c, *old, *replay);
+      }
+      if (!WriteText(cx.goldens / (c.name + ".ticks.gz"), gz, error) ||
+          !WriteText(cx.goldens / (c.name + ".toml"), GoldenToml(cx, c, *replay, trace_sha), error)) {
+        fmt::print(stderr, "palpa hil bless: {}\n", error);
+        return kExitIo;
+      }
+      detail = "    " + what + (what.ends_with("\n") ? "" : "\n");
+      verdict = m.failures.empty() ? "blessed" : "blessed (FAILS invariants)";
+    }
+    if (verdict != "ok" && verdict != "blessed") ++failed;
+    fmt::print("  {:<32} {:<14} {:>6} ticks {:>6} contact  max |f| {:7.3f} N  φmin {:+.3f} vx  {:6.2f} s  {}\n", c.name,
+               c.device, m.ticks, m.contact_ticks, m.max_force_n, m.min_proxy_phi_voxels, replay->wall_s, verdict);
+    if (m.analytic)
+      fmt::print(
+          "      sphere (Fig. 9): peak {:.3f} N, force RMS error {:.4f} N = {:.3f} % of peak, direction RMS "
+          "{:.3f}° (max {:.3f}°, {} ticks)\n",
+          m.peak_analytic_n, m.rms_error_n, m.rms_error_pct, m.rms_angle_deg, m.max_angle_deg, m.angle_ticks);
+    if (!fast)
+      fmt::print(
+          "      latency (µs, {} ticks): wake-up p50 {:.1f} p99 {:.1f} p99.9 {:.1f} max {:.1f}; compute p50 {:.1f} "
+          "p99 {:.1f} max {:.1f}; total p99 {:.1f} max {:.1f}; {}\n",
+          pw.count, pw.p50, pw.p99, pw.p999, pw.max, pc.p50, pc.p99, pc.max, pt.p99, pt.max, recorded_note);
+    for (const auto& f : m.failures) fmt::print("    invariant: {}\n", f);
+    for (const auto& f : known) fmt::print("    known failure (xfail in cases.toml): {}\n", f);
+    for (const auto& x : gone)
+      fmt::print("    xfail '{}' no longer occurs: remove it from {}\n", x, cx.suite.cases_path.string());
+    fmt::print("{}", detail);
+    std::string error;
+    if (!WriteText(replay->dir / "series.csv", SeriesCsv(replay->ticks, c, sampler, cx.k, cx.max_force), error))
+      fmt::print(stderr, "palpa hil: {}\n", error);
+    auto fig = [](const Percentiles& p) {
+      return fmt::format(
+          "{{\"count\": {}, \"p50_us\": {:.3f}, \"p99_us\": {:.3f}, \"p999_us\": {:.3f}, \"max_us\": {:.3f}}}", p.count,
+          p.p50, p.p99, p.p999, p.max);
+    };
+    const std::string extra = fmt::format(
+        "\"latency\": {{\"wake\": {}, \"compute\": {}, \"total\": {}}}, "
+        "\"estop_ticks\": {}, ",
+        fig(pw), fig(pc), fig(pt), estop_ticks);
+    const std::string json = MetricsJson(c, *replay, m, cx, fast, verdict, extra);
+    if (!WriteText(replay->dir / "result.json", json, error)) fmt::print(stderr, "palpa hil: {}\n", error);
+    index += (index.size() > 1 ? ",\n" : "\n") + json.substr(0, json.size() - 1);
+  }
+  index += "\n]\n";
+  std::string error;
+  const fs::path index_path = cx.work / "results" / (fast ? "fast" : "realtime") / "index.json";
+  if (!WriteText(index_path, index, error)) fmt::print(stderr, "palpa hil: {}\n", error);
+  if (!fast) {
+    const Percentiles w = Figures(all_wake), c = Figures(all_compute), t = Figures(all_total);
+    fmt::print("latency over all {} ticks at {} Hz (µs):\n", w.count, cx.rate);
+    fmt::print("  {:<16} {:>8} {:>8} {:>8} {:>9}\n", "", "p50", "p99", "p99.9", "max");
+    for (const auto& [name, p] : {std::pair{"wake-up latency", w}, std::pair{"compute", c}, std::pair{"total", t}})
+      fmt::print("  {:<16} {:>8.1f} {:>8.1f} {:>8.1f} {:>9.1f}\n", name, p.p50, p.p99, p.p999, p.max);
+  }
+  fmt::print("{} passed, {} failed\n", selected.size() - static_cast<std::size_t>(failed), failed);
+  return failed == 0 ? kExitOk : kExitFailed;
+}
+
+}  // namespace
+
+int RunHil(const HilArgs& args, const std::string& action) {
+  Context cx;
+  cx.args = args;
+  std::optional<fs::path> cases = args.cases.empty() ? FindCases() : std::optional<fs::path>(args.cases);
+  if (!cases) {
+    fmt::print(stderr, "palpa hil: no hil/cases.toml above the current directory (use --cases)\n");
+    return kExitBadInput;
+  }
+  auto suite = LoadSuite(*cases);
+  if (!suite) {
+    fmt::print(stderr, "palpa hil: {}\n", suite.error());
+    return kExitBadInput;
+  }
+  cx.suite = std::move(*suite);
+  cx.palpa = SelfExe();
+  if (!args.palpad.empty()) {
+    cx.palpad = fs::absolute(args.palpad);
+  } else {
+    const fs::path dir = cx.palpa.parent_path();
+    for (const fs::path& p : {dir / "palpad", dir / ".." / ".." / "firmware" / "palpad"})
+      if (fs::exists(p)) {
+        cx.palpad = fs::canonical(p);
+        break;
+      }
+  }
+  if (cx.palpad.empty() || !fs::exists(cx.palpad)) {
+    fmt::print(stderr, "palpa hil: palpad not found next to {} (use --palpad)\n", cx.palpa.string());
+    return kExitBadInput;
+  }
+  cx.work = fs::absolute(args.work.empty() ? cx.suite.root / "build" / "hil-work" : fs::path(args.work));
+  cx.goldens = fs::absolute(args.goldens.empty() ? cx.suite.hil_dir / "goldens" : fs::path(args.goldens));
+  cx.k = args.k.value_or(cx.suite.k_n_per_m);
+  cx.max_force = args.max_force.value_or(cx.suite.max_force_n);
+  cx.rate = args.rate.value_or(cx.suite.rate_hz);
+  if (action == "bless" &&
+      (args.k || args.max_force || args.rate || !args.emulator.empty() || args.mode == "realtime")) {
+    fmt::print(stderr, "palpa hil bless: goldens are blessed with the cases' own settings, natively, in fast mode\n");
+    return kExitBadInput;
+  }
+  std::error_code ec;
+  fs::create_directories(cx.work, ec);
+  if (ec) {
+    fmt::print(stderr, "palpa hil: cannot create {}: {}\n", cx.work.string(), ec.message());
+    return kExitIo;
+  }
+  if (action == "report") {
+    HilArgs run_args = args;
+    cx.args = run_args;
+    const int rc = RunCases(cx, "run");
+    if (rc == kExitBadInput || rc == kExitIo) return rc;
+    const fs::path results = cx.work / "results" / (args.mode == "realtime" ? "realtime" : "fast");
+    const fs::path script = cx.suite.root / "scripts" / "hil-report.py";
+    const std::vector<std::string> argv = {"/usr/bin/python3",
+                                           script.string(),
+                                           "--results",
+                                           results.string(),
+                                           "-o",
+                                           fs::absolute(args.report_dir).string()};
+    const int py = Spawn(argv, cx.work / "report.log", cx.work / "report.err", cx.suite.root);
+    fmt::print("{}", Slurp(cx.work / "report.log"));
+    if (py != 0) {
+      fmt::print(stderr, "palpa hil report: {} failed (exit {}):\n{}", script.string(), py,
+                 Slurp(cx.work / "report.err"));
+      return kExitIo;
+    }
+    return rc;
+  }
+  return RunCases(cx, action);
+}
+
+}  // namespace palpa::cli
