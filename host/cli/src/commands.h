@@ -3,8 +3,11 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace palpa::cli {
 
@@ -32,14 +35,94 @@ int RunExport(const std::string& field, const std::string& npy);
 
 struct TraceSynthArgs {
   std::string field;
-  std::string kind = "stroke";  ///< stroke | poke
-  std::string output;
-  double depth_m = 0.002;   ///< push-in depth below the surface
-  double stroke_m = 0.02;   ///< slide length along the surface (stroke)
-  double speed_m_s = 0.02;  ///< peak sliding speed
-  double rate_hz = 1000;    ///< samples per second
-  unsigned seed = 1;        ///< picks the touch direction
+  std::string kind = "stroke";  ///< stroke | poke | strokes | poke-grid | taps | pass-through | free | excursion
+  std::string output;           ///< .ptb: binary v2, else text v2 (docs/trace-format.md)
+  double depth_m = 0.002;       ///< push-in depth below the surface
+  double stroke_m = 0.02;       ///< slide length along the surface (stroke); ellipse major axis (strokes)
+  double speed_m_s = 0.02;      ///< peak sliding / travel speed
+  double rate_hz = 1000;        ///< samples per second
+  unsigned seed = 1;            ///< picks the touch direction
+  std::vector<double> depths;   ///< strokes: one lap per depth, m (empty: --depth)
+  std::vector<double> speeds;   ///< taps, pass-through: peak speed per tap/attempt, m/s (empty: 0.1..0.5)
+  int count = 5;                ///< poke-grid pokes, taps / attempts (without --speeds), free waypoints
+  double tremor_m = 0;          ///< RMS of the added 8–12 Hz tremor, m (0: none)
+  std::optional<double> force_n;  ///< force-constant stroking: depth = force / k
+  double k_n_per_m = 800;         ///< with --force
+  double through_m = 0.005;       ///< pass-through: how far past the far side, m
 };
 int RunTraceSynth(const TraceSynthArgs& args);
+
+// Tools for seeing and scoring a field (issue 5; library: host/mesh, docs/tools.md).
+struct SampleArgs {
+  std::string mesh;        ///< closed triangle mesh, .off
+  std::size_t count = 0;   ///< points to draw
+  std::string output;      ///< POINTS.xyz, written atomically
+  std::uint64_t seed = 1;  ///< same seed, same points
+  bool quiet = false;
+};
+int RunSample(const SampleArgs& args);
+
+struct EvalArgs {
+  std::string field;                    ///< FIELD.palpa
+  std::string mesh;                     ///< truth: closed .off mesh in model units, or
+  std::optional<double> sphere_radius;  ///< truth: sphere of this radius (model units) at the model origin
+  bool json = false;
+  double band_voxels = 3;  ///< score nodes with |true| ≤ this
+  int threads = 0;         ///< 0: all cores
+};
+int RunEval(const EvalArgs& args);
+
+struct MeshArgs {
+  std::string field;   ///< FIELD.palpa
+  std::string output;  ///< SURFACE.ply | SURFACE.obj, written atomically
+  bool quiet = false;
+};
+int RunMesh(const MeshArgs& args);
+
+struct SliceArgs {
+  std::string field;         ///< FIELD.palpa
+  char axis = 'z';           ///< x | y | z: the slice is normal to this axis
+  double at_m = 0;           ///< device-frame coordinate of the slice plane, m
+  std::string output;        ///< SLICE.png, written atomically
+  int pixels_per_voxel = 0;  ///< 0: the panel's longer side becomes at least 600 pixels
+  bool quiet = false;
+};
+int RunSlice(const SliceArgs& args);
+
+// Hardware-in-the-loop replay (issue 10; docs/hil.md): palpa hil run | bless | report.
+struct HilArgs {
+  std::string mode = "fast";           ///< fast (lockstep, goldens) | realtime (paced, invariants, latency)
+  std::string filter;                  ///< run/report: cases whose name contains any of these (comma-separated)
+  std::string device;                  ///< run/report: only cases on this device (sim | virtual-falcon)
+  std::vector<std::string> names;      ///< bless: the cases to bless
+  bool all = false;                    ///< bless: every case
+  std::string cases;                   ///< hil/cases.toml (default: found above the current directory)
+  std::string work;                    ///< fields and results (default <repo>/build/hil-work)
+  std::string goldens;                 ///< golden directory (default hil/goldens)
+  std::string palpad;                  ///< palpad binary (default: next to palpa in the build tree)
+  std::vector<std::string> emulator;   ///< prefix for palpad, e.g. qemu-aarch64 -L /
+  std::optional<double> k, max_force, rate;  ///< overrides of the cases' settings
+  std::string report_dir;              ///< report: output directory
+};
+/// `action`: run | bless | report. Exit 0 all pass, 1 a mismatch or a broken invariant, 2 bad input.
+int RunHil(const HilArgs& args, const std::string& action);
+
+// Novint Falcon kinematics for bring-up (issue 8; docs/falcon.md): joint angles and encoder
+// counts for a grip position (Falcon frame, m), and the grip position for encoder counts.
+int RunFalconIk(const std::string& position_xyz);
+int RunFalconFk(const std::string& encoders);
+
+// Servo loop latency next to cyclictest's (issue 9; docs/runtime.md): runs palpad paced on the
+// simulated device, then cyclictest at the same priority, rate and CPU, and prints both.
+struct BenchLatencyArgs {
+  double seconds = 10;    ///< each of the two runs
+  double rate_hz = 1000;  ///< 1..10000
+  int priority = 80;      ///< SCHED_FIFO, 1..99
+  int cpu = -1;           ///< pin both to this CPU; -1: not pinned
+  std::string palpad;     ///< palpad binary (default: next to palpa, the build tree's, or PATH)
+  bool cyclictest = true;
+};
+/// Exit 0 (the figures are reported, not judged), 1 if palpad could not run.
+int RunBenchLatency(const BenchLatencyArgs& args);
 
 }  // namespace palpa::cli

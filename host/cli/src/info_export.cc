@@ -15,6 +15,10 @@ const char* MethodName(blob::Method m) {
   switch (m) {
     case blob::Method::kErosion:
       return "erosion";
+    case blob::Method::kEdt:
+      return "edt";
+    case blob::Method::kHermite:
+      return "hermite";
   }
   return "unknown";
 }

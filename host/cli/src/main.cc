@@ -3,6 +3,8 @@
 #include <fmt/core.h>
 #include <CLI/CLI.hpp>
 
+#include <sstream>
+
 #include "commands.h"
 
 int main(int argc, char** argv) {
@@ -34,9 +36,12 @@ int main(int argc, char** argv) {
   build->add_option("--band", b.band_voxels, "Narrow band half-width in voxels (paper: 5-6)")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
-  build->add_option("--method", b.method, "Distance method: erosion (paper eq. 4)")
+  b.method = "hermite";  // the default (docs/field-methods.md)
+  build->add_option("--method", b.method,
+                    "Distance method: hermite (sub-voxel, default), edt (signed EDT of the packing), erosion "
+                    "(paper eq. 4)")
       ->capture_default_str()
-      ->check(CLI::IsMember({"erosion"}));
+      ->check(CLI::IsMember({"hermite", "edt", "erosion"}));
   build->add_option("--threads", b.threads, "Worker threads (0: all cores)")
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
@@ -58,8 +63,34 @@ int main(int argc, char** argv) {
   trace->require_subcommand(1);
   auto* synth = trace->add_subcommand("synth", "Synthesise a minimum-jerk HIP trace over a field's surface");
   synth->add_option("--field", t.field, "FIELD.palpa")->required();
-  synth->add_option("--kind", t.kind, "stroke | poke")->capture_default_str()->check(CLI::IsMember({"stroke", "poke"}));
-  synth->add_option("-o,--output", t.output, "Output trace CSV")->required();
+  synth
+      ->add_option(
+          "--kind", t.kind,
+          "stroke | poke | strokes (ellipses, two-thirds power law) | poke-grid | taps | pass-through | free | "
+          "excursion (docs/trace-format.md)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"stroke", "poke", "strokes", "poke-grid", "taps", "pass-through", "free", "excursion"}));
+  synth->add_option("-o,--output", t.output, "Output trace: .ptb binary v2, else text v2 (CSV)")->required();
+  synth->add_option("--depths", t.depths, "strokes: one lap per depth, m (comma-separated)")
+      ->delimiter(',')
+      ->check(CLI::Range(0.0, 0.02));
+  synth->add_option("--speeds", t.speeds, "taps, pass-through: peak speeds, m/s (comma-separated)")
+      ->delimiter(',')
+      ->check(CLI::Range(1e-3, 2.0));
+  synth->add_option("--count", t.count, "poke-grid pokes; taps/attempts without --speeds; free waypoints")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 400));
+  synth->add_option("--tremor", t.tremor_m, "RMS of an added 8-12 Hz tremor, m (sub-millimetre)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.001));
+  synth->add_option("--force", t.force_n, "Force-constant stroking: depth = force / k, N")
+      ->check(CLI::Range(0.0, 100.0));
+  synth->add_option("--k", t.k_n_per_m, "Stiffness for --force, N/m")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1e5));
+  synth->add_option("--through", t.through_m, "pass-through: distance past the far side, m")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.03));
   synth->add_option("--depth", t.depth_m, "Push-in depth below the surface, m")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 0.02));
@@ -73,6 +104,109 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(10.0, 100000.0));
   synth->add_option("--seed", t.seed, "Chooses the touch direction")->capture_default_str();
+
+  HilArgs hil_args;
+  std::string hil_emulator;
+  bool hil_fast = false, hil_realtime = false;
+  auto* hil = app.add_subcommand("hil", "Hardware-in-the-loop replay of hil/traces through palpad (docs/hil.md)");
+  hil->require_subcommand(1);
+  auto* hil_run = hil->add_subcommand("run", "Replay the cases: --fast against the goldens, --realtime paced");
+  auto* hil_bless = hil->add_subcommand("bless", "Rewrite goldens from a fast replay and print what changed");
+  auto* hil_report = hil->add_subcommand("report", "Replay, then write HTML pages with plots and a JSON summary");
+  for (auto* sub : {hil_run, hil_bless, hil_report}) {
+    sub->add_option("--cases", hil_args.cases, "Case list (default: hil/cases.toml above the current directory)");
+    sub->add_option("--work", hil_args.work, "Fields and results directory (default <repo>/build/hil-work)");
+    sub->add_option("--goldens", hil_args.goldens, "Golden directory (default hil/goldens)");
+    sub->add_option("--palpad", hil_args.palpad, "palpad binary (default: the build tree's)");
+  }
+  for (auto* sub : {hil_run, hil_report}) {
+    auto* f = sub->add_flag("--fast", hil_fast, "Lockstep replay, compared with the goldens (default)");
+    sub->add_flag("--realtime", hil_realtime, "Paced on the wall clock: invariants and latency, no goldens")
+        ->excludes(f);
+    sub->add_option("--filter", hil_args.filter, "Only cases whose name contains NAME (comma-separated)");
+    sub->add_option("--device", hil_args.device, "Only cases on this device")
+        ->check(CLI::IsMember({"sim", "virtual-falcon"}));
+    sub->add_option("--k", hil_args.k, "Override stiffness k, N/m")->check(CLI::Range(1.0, 1e5));
+    sub->add_option("--max-force", hil_args.max_force, "Override the force clamp, N")->check(CLI::Range(0.01, 100.0));
+    sub->add_option("--rate", hil_args.rate, "Override the tick rate, Hz")->check(CLI::Range(1.0, 10000.0));
+  }
+  hil_run->add_option("--emulator", hil_emulator, "Run palpad under this prefix, e.g. 'qemu-aarch64 -L /'");
+  hil_bless->add_option("names", hil_args.names, "Cases to bless");
+  hil_bless->add_flag("--all", hil_args.all, "Bless every case");
+  hil_report->add_option("-o,--output", hil_args.report_dir, "Report directory (index.html, one page per case)")
+      ->required();
+
+  BenchLatencyArgs bench_args;
+  bool bench_no_cyclictest = false;
+  auto* bench = app.add_subcommand("bench", "Measurements of the runtime (docs/runtime.md)");
+  bench->require_subcommand(1);
+  auto* bench_latency =
+      bench->add_subcommand("latency", "palpad's servo-loop wake-up latency next to cyclictest's, in one run");
+  bench_latency->add_option("--seconds", bench_args.seconds, "Duration of each run, s")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 3600.0));
+  bench_latency->add_option("--rate", bench_args.rate_hz, "Tick rate, Hz")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 10000.0));
+  bench_latency->add_option("--priority", bench_args.priority, "SCHED_FIFO priority of both")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 99));
+  bench_latency->add_option("--cpu", bench_args.cpu, "Pin both to this CPU")->check(CLI::Range(0, 1023));
+  bench_latency->add_option("--palpad", bench_args.palpad,
+                            "palpad binary (default: next to palpa or the build tree's)");
+  bench_latency->add_flag("--no-cyclictest", bench_no_cyclictest, "Skip the cyclictest anchor");
+
+  std::string falcon_ik_xyz, falcon_fk_enc;
+  auto* falcon = app.add_subcommand("falcon", "Novint Falcon kinematics for bring-up (docs/falcon.md)");
+  falcon->require_subcommand(1);
+  auto* falcon_ik = falcon->add_subcommand("ik", "Joint angles and encoder counts for a grip position");
+  falcon_ik->add_option("position", falcon_ik_xyz, "X,Y,Z in metres, Falcon frame (grip at z 0.075..0.175)")
+      ->required();
+  auto* falcon_fk = falcon->add_subcommand("fk", "Grip position for encoder counts (homed)");
+  falcon_fk->add_option("encoders", falcon_fk_enc, "E1,E2,E3 encoder counts")->required();
+
+  SampleArgs sa;
+  auto* sample = app.add_subcommand("sample", "Area-uniform oriented points from a closed triangle mesh (.off)");
+  sample->add_option("mesh", sa.mesh, "Closed triangle mesh, OFF")->required();
+  sample->add_option("-n,--count", sa.count, "Number of points")->required()->check(CLI::Range(1, 10000000));
+  sample->add_option("-o,--output", sa.output, "Output POINTS.xyz (x y z nx ny nz), written atomically")->required();
+  sample->add_option("--seed", sa.seed, "Random seed: the same seed gives the same points")->capture_default_str();
+  sample->add_flag("-q,--quiet", sa.quiet, "No report on stdout");
+
+  EvalArgs ea;
+  auto* eval = app.add_subcommand("eval", "Score a field against the true signed distance of a mesh or a sphere");
+  eval->add_option("field", ea.field, "FIELD.palpa")->required();
+  auto* eval_mesh = eval->add_option("--mesh", ea.mesh, "Truth: closed triangle mesh (.off) in model units");
+  eval->add_option("--sphere", ea.sphere_radius, "Truth: sphere of radius R (model units) at the model origin")
+      ->excludes(eval_mesh);
+  eval->add_flag("--json", ea.json, "Machine-readable output");
+  eval->add_option("--band", ea.band_voxels, "Score nodes with |true| <= this many voxels")
+      ->capture_default_str()
+      ->check(CLI::Range(0.5, 64.0));
+  eval->add_option("--threads", ea.threads, "Worker threads (0: all cores)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 256));
+
+  MeshArgs ma;
+  auto* mesh_cmd = app.add_subcommand("mesh", "Write the zero iso-surface of a field as a triangle mesh");
+  mesh_cmd->add_option("field", ma.field, "FIELD.palpa")->required();
+  mesh_cmd->add_option("-o,--output", ma.output, "SURFACE.ply or SURFACE.obj (device metres), written atomically")
+      ->required();
+  mesh_cmd->add_flag("-q,--quiet", ma.quiet, "No report on stdout");
+
+  SliceArgs sl;
+  std::string slice_axis = "z";
+  auto* slice = app.add_subcommand("slice", "Write a colour-mapped cross-section of a field as a PNG");
+  slice->add_option("field", sl.field, "FIELD.palpa")->required();
+  slice->add_option("--axis", slice_axis, "Normal of the slice plane: x, y or z")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"x", "y", "z"}));
+  slice->add_option("--at", sl.at_m, "Coordinate of the plane along --axis, device metres")->required();
+  slice->add_option("-o,--output", sl.output, "SLICE.png, written atomically")->required();
+  slice->add_option("--scale", sl.pixels_per_voxel, "Pixels per voxel (0: panel at least 600 pixels)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
+  slice->add_flag("-q,--quiet", sl.quiet, "No report on stdout");
 
   try {
     app.parse(argc, argv);
@@ -94,5 +228,26 @@ int main(int argc, char** argv) {
   if (*info) return RunInfo(info_field, info_json);
   if (*exp) return RunExport(export_field, export_npy);
   if (*synth) return RunTraceSynth(t);
+  if (*hil) {
+    hil_args.mode = hil_realtime ? "realtime" : "fast";
+    std::istringstream words(hil_emulator);
+    for (std::string w; words >> w;) hil_args.emulator.push_back(w);
+    if (*hil_run) return RunHil(hil_args, "run");
+    if (*hil_bless) return RunHil(hil_args, "bless");
+    return RunHil(hil_args, "report");
+  }
+  if (*bench_latency) {
+    bench_args.cyclictest = !bench_no_cyclictest;
+    return RunBenchLatency(bench_args);
+  }
+  if (*falcon_ik) return RunFalconIk(falcon_ik_xyz);
+  if (*falcon_fk) return RunFalconFk(falcon_fk_enc);
+  if (*sample) return RunSample(sa);
+  if (*eval) return RunEval(ea);
+  if (*mesh_cmd) return RunMesh(ma);
+  if (*slice) {
+    sl.axis = slice_axis[0];
+    return RunSlice(sl);
+  }
   return kExitBadInput;
 }
