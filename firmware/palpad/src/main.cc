@@ -147,7 +147,10 @@ int Run(const palpa::palpad::Options& o) {
   // Real-time set-up (paced runs): every refused step is one loud warning and marks the run.
   palpa::rt::RtSetup rt;
   if (!o.fast) {
-    const auto buffers = loop.buffers();
+    // Everything the loop reads or writes: its ring and histograms, and the field it samples.
+    const auto loop_buffers = loop.buffers();
+    std::vector<std::span<const std::byte>> buffers(loop_buffers.begin(), loop_buffers.end());
+    buffers.emplace_back(std::span<const std::byte>(*blob));
     palpa::rt::RtRequest request;
     request.cpu = static_cast<int>(o.cpu);
     request.priority = static_cast<int>(o.priority);

@@ -205,6 +205,15 @@ void PrintRow(const char* name, const Histogram& h) {
              h.PercentileUs(0.99), h.PercentileUs(0.999), h.max_ns / 1000, h.overflow);
 }
 
+// Adds `b` into `a` (bins, overflow, count; max of the maxima).
+void Merge(Histogram& a, const Histogram& b) {
+  if (a.bins.size() < b.bins.size()) a.bins.resize(b.bins.size(), 0);
+  for (std::size_t i = 0; i < b.bins.size(); ++i) a.bins[i] += b.bins[i];
+  a.overflow += b.overflow;
+  a.count += b.count;
+  a.max_ns = std::max(a.max_ns, b.max_ns);
+}
+
 }  // namespace
 
 int RunBenchLatency(const BenchLatencyArgs& args) {
@@ -225,20 +234,25 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
     }
   } cleanup{dir};
 
+  // The two tools alternate in `rounds` segments, so that a load change on a shared machine falls
+  // on both alike rather than on whichever ran second.
+  const int rounds = std::max(1, args.rounds);
+  const double segment_s = args.seconds / rounds;
   std::array<double, 3> center{};
   {
     const std::vector<std::byte> blob = SphereBlob(center);
     std::ofstream f(path("field.palpa"), std::ios::binary);
     f.write(reinterpret_cast<const char*>(blob.data()), static_cast<std::streamsize>(blob.size()));
-    std::ofstream(path("trace.csv")) << trace::FormatTrace(SlideTrace(center, args.seconds), "palpa bench latency");
+    std::ofstream(path("trace.csv")) << trace::FormatTrace(SlideTrace(center, segment_s), "palpa bench latency");
   }
   const std::string palpad = args.palpad.empty() ? FindPalpad() : args.palpad;
   const std::string cpu = args.cpu >= 0 ? std::to_string(args.cpu) : "";
   fmt::print(
-      "palpa bench latency: {} s at {} Hz, SCHED_FIFO priority {}, {}; simulated device (sphere, 1 mm deep slide)\n",
-      args.seconds, args.rate_hz, args.priority, cpu.empty() ? "CPU not pinned" : "CPU " + cpu);
+      "palpa bench latency: {} s each at {} Hz in {} alternating rounds, SCHED_FIFO priority {}, {}; simulated "
+      "device (sphere, 1 mm deep slide)\n",
+      args.seconds, args.rate_hz, rounds, args.priority, cpu.empty() ? "CPU not pinned" : "CPU " + cpu);
 
-  // 1. palpad's servo loop (no overrun fault: the bench counts overruns instead of stopping).
+  // palpad: no overrun fault (the bench counts overruns instead of stopping).
   std::vector<std::string> pa = {palpad,
                                  "--device",
                                  "sim",
@@ -257,63 +271,82 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
                                  "--latency-histogram",
                                  path("palpad.hist")};
   if (!cpu.empty()) pa.insert(pa.end(), {"--cpu", cpu});
-  const int pc = RunProcess(pa, path("palpad.out"), path("palpad.err"));
-  const std::string palpad_err = ReadText(path("palpad.err"));
-  if (pc != 0) {
-    fmt::print(stderr, "palpa bench latency: {} failed (exit {}):\n{}", palpad, pc, palpad_err);
-    return kExitIo;
-  }
-  std::string error;
-  const auto loop = ReadHistogram(path("palpad.hist"), error);
-  if (!loop) {
-    fmt::print(stderr, "palpa bench latency: {}\n", error);
-    return kExitIo;
-  }
-
-  // 2. cyclictest, same priority, interval, CPU and sample count; its histogram in the same layout.
+  // cyclictest: the same priority, interval, CPU and sample count, its histogram in the same layout.
   const auto interval_us = static_cast<long>(std::lround(1e6 / args.rate_hz));
-  const auto loops = static_cast<long>(std::llround(args.seconds * args.rate_hz));
-  std::optional<Histogram> anchor;
-  std::string anchor_note;
-  if (args.cyclictest) {
-    std::vector<std::string> ca = {"cyclictest",
-                                   "-m",
-                                   "-q",
-                                   "-p",
-                                   std::to_string(args.priority),
-                                   "-i",
-                                   std::to_string(interval_us),
-                                   "-l",
-                                   std::to_string(loops),
-                                   "-h",
-                                   std::to_string(kHistogramUs),
-                                   "--histfile=" + path("cyclictest.hist")};
-    if (!cpu.empty()) ca.insert(ca.end(), {"-a", cpu});
+  const auto loops = static_cast<long>(std::llround(segment_s * args.rate_hz));
+  std::vector<std::string> ca = {"cyclictest",
+                                 "-m",
+                                 "-q",
+                                 "-p",
+                                 std::to_string(args.priority),
+                                 "-i",
+                                 std::to_string(interval_us),
+                                 "-l",
+                                 std::to_string(loops),
+                                 "-h",
+                                 std::to_string(kHistogramUs),
+                                 "--histfile=" + path("cyclictest.hist")};
+  if (!cpu.empty()) ca.insert(ca.end(), {"-a", cpu});
+
+  Histogram loop, anchor;
+  bool have_anchor = args.cyclictest;
+  std::string anchor_note = args.cyclictest ? "" : "cyclictest not run (--no-cyclictest)";
+  std::string palpad_err;
+  std::array<long long, 4> compute{};  // worst round's p50, p99, p99.9, max (ns)
+  long long overruns = 0, longest = 0, dropped = 0;
+  std::string error;
+  for (int r = 0; r < rounds; ++r) {
+    const int pc = RunProcess(pa, path("palpad.out"), path("palpad.err"));
+    const std::string err = ReadText(path("palpad.err"));
+    if (pc != 0) {
+      fmt::print(stderr, "palpa bench latency: {} failed (exit {}):\n{}", palpad, pc, err);
+      return kExitIo;
+    }
+    if (r == 0) palpad_err = err;
+    const auto h = ReadHistogram(path("palpad.hist"), error);
+    if (!h) {
+      fmt::print(stderr, "palpa bench latency: {}\n", error);
+      return kExitIo;
+    }
+    if (r == 0) loop.palpad = h->palpad;
+    Merge(loop, *h);
+    std::istringstream ss(h->Palpad("compute_ns"));
+    for (long long& c : compute) {
+      long long v = 0;
+      ss >> v;
+      c = std::max(c, v);
+    }
+    overruns += std::atoll(h->Palpad("overruns").c_str());
+    longest = std::max(longest, std::atoll(h->Palpad("max_consecutive_overruns").c_str()));
+    dropped += std::atoll(h->Palpad("dropped_rows").c_str());
+
+    if (!have_anchor) continue;
     const int cc = RunProcess(ca, path("cyclictest.out"), path("cyclictest.err"));
     if (cc == 127) {
       anchor_note = "cyclictest not found (Debian: apt-get install rt-tests): no anchor";
+      have_anchor = false;
     } else if (cc != 0) {
       anchor_note = fmt::format("cyclictest failed (exit {}): {}", cc, Trim(ReadText(path("cyclictest.err"))));
+      have_anchor = false;
+    } else if (const auto c = ReadHistogram(path("cyclictest.hist"), error)) {
+      Merge(anchor, *c);
     } else {
-      anchor = ReadHistogram(path("cyclictest.hist"), error);
-      if (!anchor) anchor_note = error;
+      anchor_note = error;
+      have_anchor = false;
     }
-  } else {
-    anchor_note = "cyclictest not run (--no-cyclictest)";
   }
 
-  // 3. The report.
-  const std::string realtime = loop->Palpad("realtime");
-  fmt::print("real-time set-up: {}{}\n", realtime,
-             realtime == "yes" ? "" : " (refused: " + loop->Palpad("rt_refused") + ")");
+  const std::string realtime = loop.Palpad("realtime");
+  fmt::print("real-time set-up (palpad): {}{}\n", realtime,
+             realtime == "yes" ? "" : " (refused: " + loop.Palpad("rt_refused") + ")");
   if (!palpad_err.empty()) fmt::print("palpad said:\n{}", palpad_err);
   fmt::print("\nwake-up latency, us (nearest rank; 1 us bins, truncated, as cyclictest):\n");
   fmt::print("  {:<22}{:>9}{:>8}{:>8}{:>8}{:>8}{:>9}{:>11}\n", "", "samples", "min", "p50", "p99", "p99.9", "max",
              "overflows");
-  PrintRow("palpad servo loop", *loop);
-  if (anchor) {
-    PrintRow("cyclictest (anchor)", *anchor);
-    const std::int64_t a99 = anchor->PercentileUs(0.99), l99 = loop->PercentileUs(0.99);
+  PrintRow("palpad servo loop", loop);
+  if (have_anchor) {
+    PrintRow("cyclictest (anchor)", anchor);
+    const std::int64_t a99 = anchor.PercentileUs(0.99), l99 = loop.PercentileUs(0.99);
     if (a99 > 0) {
       fmt::print("  p99 ratio loop / cyclictest: {:.2f} (goal <= 1.5)\n",
                  static_cast<double>(l99) / static_cast<double>(a99));
@@ -326,29 +359,24 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
   } else {
     fmt::print("  {}\n", anchor_note);
   }
-  std::vector<long long> compute(4, 0);
-  {
-    std::istringstream ss(loop->Palpad("compute_ns"));
-    ss >> compute[0] >> compute[1] >> compute[2] >> compute[3];
-  }
-  fmt::print("\npalpad compute time per tick, us: p50 {:.1f}, p99 {:.1f}, p99.9 {:.1f}, max {:.1f}\n",
-             static_cast<double>(compute[0]) / 1e3, static_cast<double>(compute[1]) / 1e3,
-             static_cast<double>(compute[2]) / 1e3, static_cast<double>(compute[3]) / 1e3);
-  fmt::print("palpad overruns: {} (longest run {}), telemetry samples dropped: {}\n", loop->Palpad("overruns"),
-             loop->Palpad("max_consecutive_overruns"), loop->Palpad("dropped_rows"));
+  fmt::print(
+      "\npalpad compute time per tick, us (worst of {} rounds): p50 {:.1f}, p99 {:.1f}, p99.9 {:.1f}, max {:.1f}\n",
+      rounds, static_cast<double>(compute[0]) / 1e3, static_cast<double>(compute[1]) / 1e3,
+      static_cast<double>(compute[2]) / 1e3, static_cast<double>(compute[3]) / 1e3);
+  fmt::print("palpad overruns: {} (longest run {}), telemetry samples dropped: {}\n", overruns, longest, dropped);
 
   fmt::print("\nhistogram, wake-up latency (count per bucket):\n  {:>15}{:>12}{:>12}\n", "us", "palpad",
-             anchor ? "cyclictest" : "");
+             have_anchor ? "cyclictest" : "");
   for (std::size_t b = 0; b + 1 < kEdgesUs.size(); ++b) {
-    const std::uint64_t l = CountIn(*loop, kEdgesUs[b], kEdgesUs[b + 1]);
-    const std::uint64_t a = anchor ? CountIn(*anchor, kEdgesUs[b], kEdgesUs[b + 1]) : 0;
+    const std::uint64_t l = CountIn(loop, kEdgesUs[b], kEdgesUs[b + 1]);
+    const std::uint64_t a = have_anchor ? CountIn(anchor, kEdgesUs[b], kEdgesUs[b + 1]) : 0;
     if (l == 0 && a == 0) continue;
     fmt::print("  {:>15}{:>12}{:>12}\n", fmt::format("{}..{}", kEdgesUs[b], kEdgesUs[b + 1] - 1), l,
-               anchor ? std::to_string(a) : "");
+               have_anchor ? std::to_string(a) : "");
   }
-  if (loop->overflow != 0 || (anchor && anchor->overflow != 0))
-    fmt::print("  {:>15}{:>12}{:>12}\n", fmt::format(">= {}", kHistogramUs), loop->overflow,
-               anchor ? std::to_string(anchor->overflow) : "");
+  if (loop.overflow != 0 || (have_anchor && anchor.overflow != 0))
+    fmt::print("  {:>15}{:>12}{:>12}\n", fmt::format(">= {}", kHistogramUs), loop.overflow,
+               have_anchor ? std::to_string(anchor.overflow) : "");
   return kExitOk;
 }
 

@@ -121,6 +121,7 @@ struct BenchLatencyArgs {
   int cpu = -1;           ///< pin both to this CPU; -1: not pinned
   std::string palpad;     ///< palpad binary (default: next to palpa, the build tree's, or PATH)
   bool cyclictest = true;
+  int rounds = 5;         ///< the two alternate in this many segments of seconds/rounds each
 };
 /// Exit 0 (the figures are reported, not judged), 1 if palpad could not run.
 int RunBenchLatency(const BenchLatencyArgs& args);

@@ -142,7 +142,7 @@ int main(int argc, char** argv) {
   bench->require_subcommand(1);
   auto* bench_latency =
       bench->add_subcommand("latency", "palpad's servo-loop wake-up latency next to cyclictest's, in one run");
-  bench_latency->add_option("--seconds", bench_args.seconds, "Duration of each run, s")
+  bench_latency->add_option("--seconds", bench_args.seconds, "Measuring time of each tool (split into the rounds), s")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
   bench_latency->add_option("--rate", bench_args.rate_hz, "Tick rate, Hz")
@@ -155,6 +155,9 @@ int main(int argc, char** argv) {
   bench_latency->add_option("--palpad", bench_args.palpad,
                             "palpad binary (default: next to palpa or the build tree's)");
   bench_latency->add_flag("--no-cyclictest", bench_no_cyclictest, "Skip the cyclictest anchor");
+  bench_latency->add_option("--rounds", bench_args.rounds, "Alternate palpad and cyclictest in this many segments")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
 
   std::string falcon_ik_xyz, falcon_fk_enc;
   auto* falcon = app.add_subcommand("falcon", "Novint Falcon kinematics for bring-up (docs/falcon.md)");
