@@ -431,17 +431,17 @@ void Cull(const Scratch& s, const Lists& parent, float cx, float cy, float cz, f
     if (dp[a] <= p_limit) child.p[child.np++] = parent.p[a];
 }
 
-// The brick-level centre test, one level down: +-band if the estimate at the block centre is
-// farther than band + rho + 1 (its own error) from the surface, so that no node of the block is
-// within the band; else 0 (evaluate the nodes).
-float FarValue(const Model& model, const Block& block, float cx, float cy, float cz, float rho, float band) {
-  const float phi = EvaluateBlock(model, block, cx, cy, cz, 4.0f * band);
+// The brick-level centre test, one level down: +-band if `phi`, the estimate at the block centre
+// (clamped to +-4 band), is farther than band + rho + 1 (its own error) from the surface, so that
+// no node of the block is within the band; else 0 (evaluate the nodes).
+float FarValue(float phi, float rho, float band) {
   if (std::abs(phi) < band + rho + kCentreTestMarginVoxels) return 0.0f;
   return phi > 0.0f ? band : -band;
 }
 
-// Evaluates the nodes of one brick (s.Load done) into `values` (kBrickNodes, local order):
-// culled lists for the brick, per 4^3 block, per 2^3 block, then the per-node formula.
+// Evaluates the nodes of one brick (s.Load done) into `values` (kBrickNodes, local order): culled
+// lists and centre tests for the brick, per 4^3 and per 2^3 block, then the per-node formula, 8
+// nodes at a time.
 void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double, 3>& corner,
                    const std::array<int, 3>& box, float band, float* values) {
   constexpr int kB = SparseField::kBrick;
@@ -478,11 +478,14 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
           continue;
         }
         Pack(s, l4, block);
-        if (const float far = FarValue(model, block, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band);
+        if (const float far =
+                FarValue(EvaluateBlock(model, block, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), 4.0f * band),
+                         rho4, band);
             far != 0.0f) {
           fill(a4, b4, c4, 4, far);
           continue;
         }
+        // The eight 2^3 blocks: lists culled again, the centre test, then the 8 nodes in one pass.
         for (int a2 = a4; a2 < a4 + 4; a2 += 2)
           for (int b2 = b4; b2 < b4 + 4; b2 += 2)
             for (int c2 = c4; c2 < c4 + 4; c2 += 2) {
@@ -492,8 +495,9 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
                 continue;
               }
               Pack(s, l2, block);
-              if (const float far =
-                      FarValue(model, block, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band);
+              if (const float far = FarValue(
+                      EvaluateBlock(model, block, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), 4.0f * band), rho2,
+                      band);
                   far != 0.0f) {
                 fill(a2, b2, c2, 2, far);
                 continue;

@@ -56,7 +56,7 @@ void ForFaceNodes(int f, const std::array<int, 3>& box, Fn&& fn) {
 // branch-free pass; most bricks have none).
 bool AnyViolation(const float* h, const std::array<int, 3>& box) {
   constexpr float step = SparseField::kLipschitzStep;
-  bool any = false;
+  std::uint32_t any = 0;  // an integer OR, so that the row loop vectorises
   for (int a = 0; a < box[0]; ++a)
     for (int b = 0; b < box[1]; ++b) {
       const float* row = h + H(a, b, 0);
@@ -66,12 +66,12 @@ bool AnyViolation(const float* h, const std::array<int, 3>& box) {
         const float mag = std::abs(v);
         for (const int o : kHaloStep) {
           const float u = row[c + o];
-          // NaN (no node) compares false.
-          any |= ((u <= 0.0f) == inside) && (u == u) && (mag > std::abs(u) + step);
+          // NaN (no node) fails u == u.
+          any |= static_cast<std::uint32_t>(((u <= 0.0f) == inside) & (u == u) & (mag > std::abs(u) + step));
         }
       }
     }
-  return any;
+  return any != 0;
 }
 
 // Gauss-Seidel relaxation of |phi| <- min(|phi|, |phi_nb| + step) over same-sign axis
@@ -481,23 +481,24 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
       for (std::size_t w = r.begin(); w != r.end(); ++w) {
         const std::size_t b = allocated[w];
         GatherHalo(b, h.data());
-        if (AnyViolation(h.data(), Box(BrickCoords(b)[0], BrickCoords(b)[1], BrickCoords(b)[2]).n)) first[b] |= 1;
         const std::array<int, 3> c = BrickCoords(b);
         const BrickBox box = Box(c[0], c[1], c[2]);
+        if (AnyViolation(h.data(), box.n)) first[b] |= 1;
         float* out = scaled.data() + static_cast<std::size_t>(slots_[b]) * kBrickNodes;
         for (int a = 0; a < box.n[0]; ++a)
           for (int bb = 0; bb < box.n[1]; ++bb)
             for (int cc = 0; cc < box.n[2]; ++cc) {
               const float v = h[static_cast<std::size_t>(H(a, bb, cc))];
               const bool inside = v <= 0.0f;
-              float scale = 1.0f;
+              // min over neighbours of step / sum = step / (largest sum): division is monotone.
+              float largest = 0.0f;
               for (const int o : kHaloStep) {
                 const float u = h[static_cast<std::size_t>(H(a, bb, cc) + o)];
                 if (std::isnan(u) || (u <= 0.0f) == inside) continue;
-                const float sum = std::abs(v) + std::abs(u);
-                if (sum > kLipschitzStep) scale = std::min(scale, kLipschitzStep / sum);
+                largest = std::max(largest, std::abs(v) + std::abs(u));
               }
-              if (scale < 1.0f) {
+              if (largest > kLipschitzStep) {
+                const float scale = kLipschitzStep / largest;
                 // An outside node stays strictly positive (phi <= 0 means inside).
                 out[L(a, bb, cc)] = inside ? v * scale : std::max(v * scale, std::numeric_limits<float>::min());
                 ++local;
