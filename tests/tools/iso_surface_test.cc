@@ -8,6 +8,7 @@
 #include <string>
 
 #include "field_fixtures.h"
+#include "palpa/blob/blob.h"
 #include "palpa/mesh/iso_surface.h"
 #include "tools_test_util.h"
 
@@ -170,6 +171,37 @@ TEST_F(MeshCli, WritesPlyAndObjAndRefusesOtherExtensions) {
   EXPECT_EQ(missing.code, 2) << missing.out;
   EXPECT_NE(missing.out.find("none.palpa"), std::string::npos) << missing.out;
   EXPECT_FALSE(fs::exists(Path("n.ply")));
+}
+
+}  // namespace
+}  // namespace palpa::tools_test
+
+namespace palpa::tools_test {
+namespace {
+
+// Issue 5: the zero iso-surface of the field palpa builds from sphere926 (default method) lies
+// within 0.1 voxel of the true sphere |x| = 10 (model units) at every vertex, and is closed.
+class Sphere926Mesh : public TempDirTest {};
+
+TEST_F(Sphere926Mesh, EveryVertexWithinATenthOfAVoxelOfRadiusTenAndClosed) {
+  const std::string field = Path("s926.palpa");
+  const Outcome b = Palpa("build " + DataFile("sphere926.pwn").string() + " -o " + field + " --cells 150 -q");
+  ASSERT_EQ(b.code, 0) << b.out;
+  auto bytes = blob::ReadFile(field.c_str());
+  ASSERT_TRUE(bytes.has_value());
+  const auto view = blob::Verify(*bytes);
+  ASSERT_TRUE(view.has_value()) << view.error().what();
+  auto m = mesh::ExtractZeroSurface(*view);
+  ASSERT_TRUE(m) << m.error().message;
+  ASSERT_GT(m->vertices.size(), 1000u);
+  const Eigen::Vector3d centre(view->fit_offset_m[0], view->fit_offset_m[1], view->fit_offset_m[2]);
+  const double r_m = 10.0 * view->fit_scale;
+  double worst = 0;
+  for (const auto& v : m->vertices) worst = std::max(worst, std::abs((v - centre).norm() - r_m) / view->voxel_m);
+  RecordProperty("max_vertex_error_voxels", std::to_string(worst));
+  EXPECT_LE(worst, 0.1);
+  EXPECT_TRUE(mesh::CheckClosedOriented(*m, "surface"));
+  EXPECT_EQ(EulerCharacteristic(*m), 2);
 }
 
 }  // namespace
