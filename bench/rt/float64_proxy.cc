@@ -65,6 +65,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
   Vec3d g = st.grad;
   bool grad_valid = st.grad_valid;
   int halvings = 0, gradient_samples = 0;
+  bool leave_blocked = false;
   const int max_samples = prm.max_iterations;
   for (int pass = 0; pass < 2 * max_samples + 2 && samples < max_samples && p != h; ++pass) {
     if (phi_p > prm.near) {  // free motion
@@ -109,7 +110,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
     if (gg < 1.0 / 16) break;
     // Contact iterations.
     bool lagging = false, done = false, leave = false;
-    while (samples < max_samples && (samples < prm.settle_samples || lagging)) {
+    while (samples < max_samples) {
       const Vec3d d = Sub(h, p);
       const double gg_now = Dot(g, g);
       if (gg_now < 1.0 / 16) {
@@ -117,7 +118,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         break;
       }
       const double c = phi_p + Dot(d, g);
-      if (c >= 0) {
+      if (c >= 0 && !leave_blocked) {
         if (!phi_h_known) {
           phi_h = field.Phi(h);
           phi_h_known = true;
@@ -128,6 +129,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
           break;
         }
       }
+      if (samples >= prm.settle_samples && !lagging) break;
       const Vec3d dn = {-prm.beta * phi_p / gg_now * g[0], -prm.beta * phi_p / gg_now * g[1],
                         -prm.beta * phi_p / gg_now * g[2]};
       const double along = Dot(d, g) / gg_now;
@@ -210,24 +212,37 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         break;
       }
     }
-    if (leave) {
-      const Vec3d d = Sub(h, p);
-      const double scale = std::ldexp(1.0, -halvings);
-      const Vec3d q = Add(p, d, scale);
-      if (q == p) break;
-      double phi_q = phi_h;
-      if (q != h) {
-        phi_q = field.Phi(q);
+    if (leave) {  // march straight to the HIP in steps certified by construction; blocked: slide
+      bool left = false, jumped = false;
+      while (samples < max_samples) {
+        const Vec3d d = Sub(h, p);
+        const double len = Len(d);
+        if (len == 0) break;
+        const double rate = std::min(field.norm(), AxisVariation(d, field) / len);
+        const double budget = phi_p + piece;
+        const double step = rate == 0 ? len : budget / rate;
+        if (step >= len && phi_h >= -delta / 2) {
+          p = h;
+          phi_p = phi_h;
+          grad_valid = false;
+          jumped = true;
+          break;
+        }
+        const Vec3d q = Add(p, d, std::min(step, len) / len);
+        if (q == p) break;
+        const double phi_q = field.Phi(q);
         ++samples;
-      }
-      if (phi_q >= -delta / 2 && Certified(phi_p, phi_q, Sub(q, p), field, delta)) {
+        if (phi_q < -delta / 2 || !Certified(phi_p, phi_q, Sub(q, p), field, delta)) break;
         p = q;
         phi_p = phi_q;
         grad_valid = false;
-        halvings = 0;
-      } else if (++halvings > 16) {
-        break;
+        if (phi_q > prm.near) {
+          left = true;
+          break;
+        }
       }
+      if (jumped) break;
+      if (!left && samples < max_samples) leave_blocked = true;
       continue;
     }
     if (done || phi_p <= prm.near) break;  // budget, convergence or nothing to do; else free motion
@@ -240,10 +255,10 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
   r.proxy = p;
   r.iterations = samples;
   if (p == h) return r;
-  bool behind = false;
-  if (grad_valid) {
+  bool behind = leave_blocked;
+  if (!behind && grad_valid) {
     behind = phi_p + Dot(Sub(h, p), g) < 0;
-  } else if (phi_h_known) {
+  } else if (!behind && phi_h_known) {
     behind = phi_h < 0;
   }
   if (phi_p > prm.near || !behind) return r;

@@ -214,7 +214,8 @@ struct Tick {
   std::int64_t phi_h;
   int samples;
   int gradient_samples;
-  int halvings;  // consecutive rejected steps: the next move is halved this often
+  int halvings;        // consecutive rejected steps: the next move is halved this often
+  bool leave_blocked;  // the straight way to an outside HIP runs into the object: slide instead
 
   // Member by member (an aggregate initialisation here compiles to a block clear first).
   Tick(const sampler::TrilinearSampler& f, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far, bool is_fast,
@@ -234,7 +235,8 @@ struct Tick {
         phi_h(phi_at_hip),
         samples(have_phi_h ? 1 : 0),
         gradient_samples(0),
-        halvings(0) {}
+        halvings(0),
+        leave_blocked(false) {}
 };
 
 enum class Next { kContinue, kDone };
@@ -279,25 +281,43 @@ Next SamplePhiAtHip(Tick& t) {
   return Next::kContinue;
 }
 
-// Leaving contact: the HIP is outside the linearisation and the field. Move towards it, halving
-// the step until the segment certifies.
+// Leaving contact: the HIP is in front of the surface linearised at the proxy and outside the
+// field. March straight towards it in steps that certify by construction: from a with φ(a) known,
+// a step of length L whose end has φ ≥ −δ/2 keeps the whole step above −δ once Λ·L ≤ φ(a) + 3δ/2,
+// so each step is as long as that allows (sphere tracing: the steps grow as the proxy leaves the
+// surface) and only its end is sampled. Jump when the HIP is within reach. An end with φ < −δ/2
+// means the straight way runs into the object (the HIP went through a thin part): the proxy is
+// blocked there and eq. 9's tangential slide takes over (ContactRun), wrapping it round the part
+// while the spring keeps pulling the HIP back; the force never drops to zero with the HIP still
+// on the far side.
 [[gnu::noinline]] Next LeaveStep(Tick& t) {
-  const Vec step = Halve(Sub(t.h, t.p), t.halvings);
-  const Vec q = Plus(t.p, step);
-  if (q == t.p) return Next::kDone;
-  std::int64_t phi_q = t.phi_h;
-  if (q != t.h) {
-    phi_q = t.field.Phi(ToGridPos(q));
+  while (t.samples < t.params.max_iterations) {
+    const Vec d = Sub(t.h, t.p);
+    const auto len = static_cast<std::int64_t>(ISqrt(Norm2(d)));
+    if (len == 0) return Next::kDone;
+    // Λ along d, rounded up; 0 only for a constant field.
+    const std::int64_t rate = std::min<std::int64_t>(t.lb.norm, fixed::FloorDiv(AxisVariation(d, t.lb) + len - 1, len));
+    // φ budget after the rounding slack and the truncation of the new position (≤ 1 LSB per axis).
+    const std::int64_t budget = t.at.phi + 3 * t.delta / 2 - kSlack - ((2 * std::int64_t{t.lb.norm}) >> 16) - 1;
+    if (budget <= 0) break;
+    const std::int64_t step = rate == 0 ? len : fixed::FloorDiv(budget << 16, rate);
+    if (step >= len && t.phi_h >= -t.delta / 2) {  // the HIP itself is within a certified step
+      t.p = t.h;
+      t.at.phi = t.phi_h;
+      t.grad_valid = false;
+      return Next::kDone;
+    }
+    const Vec q = Plus(t.p, Scale(d, std::min(step, len), len));
+    if (q == t.p) break;
+    const std::int64_t phi_q = t.field.Phi(ToGridPos(q));
     ++t.samples;
-  }
-  if (phi_q >= -t.delta / 2 && Certified(t.at.phi, phi_q, step, t.lb, t.delta)) {
+    if (phi_q < -t.delta / 2 || !Certified(t.at.phi, phi_q, Sub(q, t.p), t.lb, t.delta)) break;
     t.p = q;
     t.at.phi = phi_q;
     t.grad_valid = false;
-    t.halvings = 0;
-  } else if (++t.halvings > kMaxHalvings) {
-    return Next::kDone;
+    if (phi_q > t.params.near_q16) return Next::kContinue;  // off the surface: free motion next
   }
+  if (t.samples < t.params.max_iterations) t.leave_blocked = true;
   return Next::kContinue;
 }
 
@@ -319,19 +339,21 @@ enum class Contact { kDone, kLeave, kContinue };
   Local at = t.at;
   Contact result = Contact::kDone;
   bool lagging = false;  // the last move left its target far (see below): more samples allowed
-  while (t.samples < prm.max_iterations && (t.samples < prm.settle_samples || lagging)) {
+  // (The settle budget gates moves, not leaving: a HIP in front of the surface is tested first.)
+  while (t.samples < prm.max_iterations) {
     if (at.inv_grad2 == 0) break;  // |∇φ| < 1/4: no normal to project along
     const std::int64_t gx = at.grad[0], gy = at.grad[1], gz = at.grad[2];
     std::int64_t dx = hx - px, dy = hy - py, dz = hz - pz;
     std::int64_t dot16 = RoundShift(dx * gx + dy * gy + dz * gz, 16);
     const std::int64_t c = at.phi + dot16;  // φ linearised at X_p, evaluated at X_h
-    if (c >= 0) {
+    if (c >= 0 && !t.leave_blocked) {
       if (!t.phi_h_known) SamplePhiAtHip(t);  // (the settle budget does not gate leaving)
       if (t.phi_h >= 0) {
         result = Contact::kLeave;
         break;
       }
     }
+    if (t.samples >= prm.settle_samples && !lagging) break;
     if (t.far) {  // |d_i| ≤ 64 voxels, shrunk along its direction, bounds the products below
       const Vec d = ShrinkTo({dx, dy, dz}, 22);
       dx = d[0], dy = d[1], dz = d[2];
@@ -544,11 +566,12 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
   if (t.p == t.h) return r;
 
   // Eq. 10 only when the proxy is at the surface (within the near band, where eq. 9 holds it) and
-  // the HIP is behind it; a proxy still catching up in free space gives no force.
-  bool behind = false;
-  if (t.grad_valid) {
+  // the HIP is behind it, or beyond a part it cannot cross; a proxy still catching up in free
+  // space gives no force.
+  bool behind = t.leave_blocked;
+  if (!behind && t.grad_valid) {
     behind = t.at.phi + RoundShift(Dot(Sub(t.h, t.p), t.at.grad), 16) < 0;
-  } else if (t.phi_h_known) {
+  } else if (!behind && t.phi_h_known) {
     behind = t.phi_h < 0;
   }
   if (t.at.phi > params.near_q16 || !behind) return r;
@@ -618,25 +641,26 @@ std::int64_t SaturatingAdd(std::int64_t a, std::int64_t b) {
 
 void PassivityObserver::Update(GridPos hip, const TickResult& r, const ProxyParams& params) {
   const std::array<std::int32_t, 3> force = {r.force[0].value.raw(), r.force[1].value.raw(), r.force[2].value.raw()};
-  // u = X_h − X_p of the spring that produced the force (zero when no force was written).
-  const Vec u = r.contact ? Diff(hip, r.proxy) : Vec{};
+  const bool held = (last_force[0] | last_force[1] | last_force[2]) != 0;
   if (primed) {
     // Differences of raw int32 positions are < 2^32; clamped to ±2^30 (far beyond any grid) so
     // that every product below fits int64. f·Δh: |f| ≤ 2^23 raw.
     const auto clamp30 = [](std::int64_t v) { return std::clamp<std::int64_t>(v, -(1LL << 30), 1LL << 30); };
-    const Vec dh = Diff(hip, last_hip);
+    const Vec d = Diff(hip, last_hip);
+    const Vec dh = {clamp30(d[0]), clamp30(d[1]), clamp30(d[2])};
     std::int64_t work = 0;
-    for (std::size_t a = 0; a < 3; ++a) work -= std::int64_t{last_force[a]} * clamp30(dh[a]);
+    for (std::size_t a = 0; a < 3; ++a) work -= std::int64_t{last_force[a]} * dh[a];
     energy_q32 = SaturatingAdd(energy_q32, work);
-    const Vec du = {clamp30(u[0] - last_u[0]), clamp30(u[1] - last_u[1]), clamp30(u[2] - last_u[2])};
-    // (k/2)|Δu|²: Q16 × (Q32 >> 16) → Q32 N·voxel, saturating.
-    std::int64_t term = 0;
-    if (__builtin_mul_overflow(std::int64_t{params.k.value.raw()}, Norm2(du) >> 16, &term))
-      term = std::numeric_limits<std::int64_t>::max();
-    zoh_bound_q32 = SaturatingAdd(zoh_bound_q32, term / 2);
+    // (k/2)|ΔX_h|² over an interval that starts or ends in contact (docs/realtime-core.md
+    // § Passivity observer): Q16 × (Q32 >> 16) → Q32 N·voxel, saturating. |ΔX_h|² ≤ 3·2^60.
+    if (held || r.contact) {
+      std::int64_t term = 0;
+      if (__builtin_mul_overflow(std::int64_t{params.k.value.raw()}, Norm2(dh) >> 16, &term))
+        term = std::numeric_limits<std::int64_t>::max();
+      zoh_bound_q32 = SaturatingAdd(zoh_bound_q32, term / 2);
+    }
   }
   last_hip = hip;
-  last_u = u;
   last_force = force;
   primed = true;
 }

@@ -145,16 +145,16 @@ TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& 
 ///
 ///   energy_q32  E_n = −Σ_{m<n} f_m · (X_h,m+1 − X_h,m)   energy the user put into the virtual
 ///               environment, the force f_m held over the period (zero-order hold)
-///   zoh_bound_q32  B_n = (k·h/2) Σ_{m<n} |Δu_m|²,  u = X_h − X_p   the most a sampled spring can
-///               give back beyond what it stored: for a frictionless proxy at its constrained
-///               minimum E_n = V_n + B'_n − B_n with V, B' ≥ 0 (docs/realtime-core.md § Passivity),
-///               so E_n ≥ −B_n: E going below −B_n flags an active (energy-generating) tick.
+///   zoh_bound_q32  B_n = (k·h/2) Σ |ΔX_h,m|² over the intervals m < n that start or end in
+///               contact: the most a sampled spring can give back beyond what it stored. For a
+///               proxy at its constrained minimum (with or without friction, clamped or not)
+///               E_n ≥ W(u_n) − B_n ≥ −B_n, W the clamped spring's convex potential
+///               (docs/realtime-core.md § Passivity observer): E below −B_n flags an active tick.
 /// Both in Q32.32 N·voxel (multiply by voxel_m for joules), saturating.
 struct PassivityObserver {
   std::int64_t energy_q32 = 0;
   std::int64_t zoh_bound_q32 = 0;
   GridPos last_hip;
-  std::array<std::int64_t, 3> last_u{};  ///< X_h − X_p of the last tick's spring, Q16.16 voxels
   std::array<std::int32_t, 3> last_force{};
   bool primed = false;
 
