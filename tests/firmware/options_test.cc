@@ -136,6 +136,17 @@ TEST(PalpadOptions, RuntimeDefaultsAndValues) {
   EXPECT_EQ(o->status_path, "/run/palpa/status.json");
 }
 
+TEST(PalpadOptions, EstopOnAGripButton) {
+  const auto o = Parse({"--field", "f", "--trace", "t", "--out", "o", "--estop", "button:3", "--estop-debounce", "2"});
+  ASSERT_TRUE(o.has_value()) << o.error();
+  EXPECT_EQ(o->estop_button, 3);
+  EXPECT_FALSE(o->estop_line.has_value());
+  EXPECT_EQ(o->estop_debounce, 2);
+  const auto none = Parse({"--field", "f", "--trace", "t", "--out", "o"});
+  ASSERT_TRUE(none.has_value()) << none.error();
+  EXPECT_EQ(none->estop_button, -1);
+}
+
 TEST(PalpadOptions, RuntimeErrors) {
   const std::vector<std::pair<std::vector<const char*>, const char*>> cases = {
       {{"--cpu", "-2"}, "--cpu must be a whole number"},
@@ -150,6 +161,9 @@ TEST(PalpadOptions, RuntimeErrors) {
       {{"--estop", "c:1", "--tick-gpio", "c:1"}, "name the same line"},
       {{"--watchdog-ms", "-1"}, "--watchdog-ms must be in 0..10000"},
       {{"--overrun-limit", "2.5"}, "--overrun-limit must be a whole number"},
+      {{"--estop", "button:8"}, "--estop button:N needs a button bit N in 0..7"},
+      {{"--estop", "button:"}, "--estop button:N needs a button bit N in 0..7"},
+      {{"--estop", "button:12"}, "--estop button:N needs a button bit N in 0..7"},
   };
   for (const auto& [extra, message] : cases) {
     std::vector<const char*> args = {"--field", "f", "--trace", "t", "--out", "o"};

@@ -207,6 +207,36 @@ TEST(HilRecord, RecordingOfAReplayReplaysToTheSameOutput) {
   fs::remove_all(dir);
 }
 
+// Buttons travel from the trace through the device and the telemetry ring into a recording: the
+// e-stop replay (grip button 0 held 1.2-1.7 s) recorded and replayed with the same --estop gives
+// the same output byte for byte, and the recording holds the button exactly where the trace did.
+TEST(HilRecord, RecordingKeepsTheButtonsThatDriveTheEstop) {
+  ASSERT_EQ(Palpa("hil run --fast --filter sphere-estop-mid-contact" + Common()).code, 0);
+  const std::string dir = TempDir("record-estop");
+  const std::string trace = std::string(PALPA_SOURCE_DIR) + "/hil/traces/sphere-estop-mid-contact.ptb";
+  const std::string base =
+      std::string(PALPAD_BIN) + " --device sim --fast --estop button:0 --field " + kWork + "/fields/sphere.palpa";
+  auto run = [](const std::string& cmd) { return std::system((cmd + " > /dev/null 2>&1").c_str()); };
+  ASSERT_EQ(run(base + " --trace " + trace + " --out " + dir + "/a.csv --record " + dir + "/rec.ptb"), 0);
+  auto src = palpa::trace::ReadTraceFile(trace);
+  auto rec = palpa::trace::ReadTraceFile(dir + "/rec.ptb");
+  ASSERT_TRUE(src.has_value() && rec.has_value());
+  ASSERT_EQ(rec->samples.size(), src->samples.size());  // 1 kHz trace, 1 kHz replay: one tick a sample
+  std::size_t pressed = 0;
+  for (std::size_t i = 0; i < rec->samples.size(); ++i) {
+    ASSERT_EQ(rec->samples[i].buttons, src->samples[i].buttons) << "tick " << i;
+    pressed += rec->samples[i].buttons & 1u;
+  }
+  EXPECT_EQ(pressed, 500u);  // 1.2 <= t < 1.7 s
+  ASSERT_EQ(run(base + " --trace " + dir + "/rec.ptb --out " + dir + "/b.csv"), 0);
+  auto slurp = [](const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  EXPECT_TRUE(slurp(dir + "/a.csv") == slurp(dir + "/b.csv"));
+  fs::remove_all(dir);
+}
+
 // The recorder on its own: ring drops show as tick gaps, refused samples are counted, the trace
 // and the timing CSV hold what was consumed.
 TEST(HilRecord, RecorderCountsDropsAndRefusals) {

@@ -327,6 +327,7 @@ device::IoStatus FalconDevice::DoRead(device::HipReading& out) {
   if (!UpdatePose(st, now)) return device::IoStatus::kError;
   for (std::size_t a = 0; a < 3; ++a) out.hip_m[a] = grip_m_[a] - config_.workspace_origin_m[a];
   out.t_s = static_cast<double>(now - active_start_ns_) * 1e-9;
+  out.buttons = st.buttons;
   ++ticks_;
   return device::IoStatus::kOk;
 }

@@ -28,6 +28,8 @@ device::IoStatus SimDevice::DoRead(device::HipReading& out) {
   const double t = TickTime(reads_, rate_hz_);
   out.hip_m = trace::HipAt(samples_, t, cursor_);
   out.t_s = t;
+  // Buttons are levels, not interpolated: those of the last sample at or before t.
+  out.buttons = t >= samples_.back().t_s ? samples_.back().buttons : samples_[cursor_].buttons;
   ++reads_;
   return device::IoStatus::kOk;
 }

@@ -415,6 +415,9 @@ void VirtualFalcon::Exchange(const falcon::MotorCommand& received) {
   falcon::DeviceStatus st;
   st.encoders = encoders_;
   st.homed = homed_;
+  // The grip buttons the hand holds: the trace's column at the hand's place in it (4 bits on the wire).
+  if (hand_ == Hand::kTrace && !config_.trace.empty())
+    st.buttons = config_.trace[std::min(trace_cursor_, config_.trace.size() - 1)].buttons;
   const std::uint64_t n = run_exchanges_;
   if (run_started_) {
     if (FaultAt(FaultKind::kJump, n))

@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include "button_input.h"
 #include "falcon_session.h"
 #include "palpa/blob/blob.h"
 #include "palpa/device_sim/sim_device.h"
@@ -129,7 +130,9 @@ int Run(const palpa::palpad::Options& o) {
   sc.telemetry_capacity = kTelemetryCapacity;
   sc.wait_when_full = o.fast;  // lockstep replay: complete, deterministic output; paced: drop, never wait
   sc.overrun_fault_limit = static_cast<std::uint32_t>(o.overrun_limit);
-  sc.estop = estop.get();
+  std::optional<palpa::palpad::DeviceButtonInput> estop_button;
+  if (o.estop_button >= 0) estop_button.emplace(*device, o.estop_button);
+  sc.estop = estop ? static_cast<palpa::gpio::DigitalInput*>(estop.get()) : estop_button ? &*estop_button : nullptr;
   sc.estop_active_high = o.estop_active_high;
   sc.estop_release_ticks = static_cast<std::uint32_t>(o.estop_debounce);
   sc.ramp_ticks = static_cast<std::uint32_t>(std::llround(o.ramp_ms * 1e-3 * o.rate_hz));

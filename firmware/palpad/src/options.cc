@@ -113,7 +113,14 @@ std::expected<void, std::string> CheckRuntime(Options& o, const bool (&given)[kS
   auto active = gpio::ParseActiveLevel("--estop-active", o.estop_active);
   if (!active) return std::unexpected(std::move(active.error()));
   o.estop_active_high = *active;
-  if (!o.estop.empty()) {
+  if (o.estop.starts_with("button:")) {
+    // A grip button as the e-stop (a dead-man input): no GPIO chip needed; it works on every
+    // device that reports buttons (the Falcon, the virtual Falcon, a replay's buttons column).
+    const std::string_view bit = std::string_view(o.estop).substr(7);
+    if (bit.size() != 1 || bit[0] < '0' || bit[0] > '7')
+      return std::unexpected("--estop button:N needs a button bit N in 0..7 (Falcon grip: 0-3), got '" + o.estop + "'");
+    o.estop_button = bit[0] - '0';
+  } else if (!o.estop.empty()) {
     auto line = gpio::ParseLineSpec("--estop", o.estop);
     if (!line) return std::unexpected(std::move(line.error()));
     o.estop_line = std::move(*line);
@@ -174,6 +181,7 @@ const char* Usage() {
          "  --overrun-limit N     N consecutive overruns: zero force, fault, exit 1 (default 10; 0 never)\n"
          "  --watchdog-ms MS      a tick running longer latches a fault (default 50; 0 off)\n"
          "  --estop CHIP:LINE     e-stop input (libgpiod), e.g. gpiochip0:17: zero force while asserted\n"
+         "  --estop button:N      or the device's grip button N (0..7) as the e-stop (read a tick late)\n"
          "  --estop-active LEVEL  high (default) or low: the level that asserts the e-stop\n"
          "  --estop-debounce N    released reads (ticks) before a release counts (default 5)\n"
          "  --ramp-ms MS          after a release the force ramps in over MS (default 500)\n"

@@ -57,7 +57,7 @@ class Recorder final : public servo::TelemetrySink {
     if (s.tick > next_tick_) gaps_ += s.tick - next_tick_;  // the ring dropped these
     next_tick_ = s.tick + 1;
     ++samples_;
-    if (writer_) (void)writer_->Add({s.row.t_s, s.row.hip_m, 0});
+    if (writer_) (void)writer_->Add({s.row.t_s, s.row.hip_m, s.buttons});
     if (timing_.file != nullptr && !timing_failed_) {
       // total: deadline to force written (paced), or the compute time alone (fast, no deadline).
       const std::int64_t total = s.wake_latency_ns >= 0 ? s.wake_latency_ns + s.compute_ns : s.compute_ns;

@@ -165,6 +165,7 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
 
   s.row.t_s = reading.t_s;
   s.row.hip_m = reading.hip_m;
+  s.buttons = reading.buttons;
   std::array<double, 3> force_n = {0.0, 0.0, 0.0};
   if (estop) {
     s.flags |= kFlagEstop;

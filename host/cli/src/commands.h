@@ -35,20 +35,22 @@ int RunExport(const std::string& field, const std::string& npy);
 
 struct TraceSynthArgs {
   std::string field;
-  std::string kind = "stroke";  ///< stroke | poke | strokes | poke-grid | taps | pass-through | free | excursion
-  std::string output;           ///< .ptb: binary v2, else text v2 (docs/trace-format.md)
-  double depth_m = 0.002;       ///< push-in depth below the surface
-  double stroke_m = 0.02;       ///< slide length along the surface (stroke); ellipse major axis (strokes)
-  double speed_m_s = 0.02;      ///< peak sliding / travel speed
-  double rate_hz = 1000;        ///< samples per second
-  unsigned seed = 1;            ///< picks the touch direction
-  std::vector<double> depths;   ///< strokes: one lap per depth, m (empty: --depth)
-  std::vector<double> speeds;   ///< taps, pass-through: peak speed per tap/attempt, m/s (empty: 0.1..0.5)
-  int count = 5;                ///< poke-grid pokes, taps / attempts (without --speeds), free waypoints
-  double tremor_m = 0;          ///< RMS of the added 8–12 Hz tremor, m (0: none)
-  std::optional<double> force_n;  ///< force-constant stroking: depth = force / k
-  double k_n_per_m = 800;         ///< with --force
-  double through_m = 0.005;       ///< pass-through: how far past the far side, m
+  std::string kind = "stroke";        ///< stroke | poke | strokes | poke-grid | taps | pass-through | free | excursion
+  std::string output;                 ///< .ptb: binary v2, else text v2 (docs/trace-format.md)
+  double depth_m = 0.002;             ///< push-in depth below the surface
+  double stroke_m = 0.02;             ///< slide length along the surface (stroke); ellipse major axis (strokes)
+  double speed_m_s = 0.02;            ///< peak sliding / travel speed
+  double rate_hz = 1000;              ///< samples per second
+  unsigned seed = 1;                  ///< picks the touch direction
+  std::vector<double> depths;         ///< strokes: one lap per depth, m (empty: --depth)
+  std::vector<double> speeds;         ///< taps, pass-through: peak speed per tap/attempt, m/s (empty: 0.1..0.5)
+  int count = 5;                      ///< poke-grid pokes, taps / attempts (without --speeds), free waypoints
+  double tremor_m = 0;                ///< RMS of the added 8–12 Hz tremor, m (0: none)
+  std::optional<double> force_n;      ///< force-constant stroking: depth = force / k
+  double k_n_per_m = 800;             ///< with --force
+  double through_m = 0.005;           ///< pass-through: how far past the far side, m
+  std::vector<double> button_window;  ///< [start, end) s with button `button_bit` held (empty: no buttons column)
+  int button_bit = 0;                 ///< 0..7 (Falcon grip: 0-3)
 };
 int RunTraceSynth(const TraceSynthArgs& args);
 
@@ -91,18 +93,18 @@ int RunSlice(const SliceArgs& args);
 
 // Hardware-in-the-loop replay (issue 10; docs/hil.md): palpa hil run | bless | report.
 struct HilArgs {
-  std::string mode = "fast";           ///< fast (lockstep, goldens) | realtime (paced, invariants, latency)
-  std::string filter;                  ///< run/report: cases whose name contains any of these (comma-separated)
-  std::string device;                  ///< run/report: only cases on this device (sim | virtual-falcon)
-  std::vector<std::string> names;      ///< bless: the cases to bless
-  bool all = false;                    ///< bless: every case
-  std::string cases;                   ///< hil/cases.toml (default: found above the current directory)
-  std::string work;                    ///< fields and results (default <repo>/build/hil-work)
-  std::string goldens;                 ///< golden directory (default hil/goldens)
-  std::string palpad;                  ///< palpad binary (default: next to palpa in the build tree)
-  std::vector<std::string> emulator;   ///< prefix for palpad, e.g. qemu-aarch64 -L /
+  std::string mode = "fast";                 ///< fast (lockstep, goldens) | realtime (paced, invariants, latency)
+  std::string filter;                        ///< run/report: cases whose name contains any of these (comma-separated)
+  std::string device;                        ///< run/report: only cases on this device (sim | virtual-falcon)
+  std::vector<std::string> names;            ///< bless: the cases to bless
+  bool all = false;                          ///< bless: every case
+  std::string cases;                         ///< hil/cases.toml (default: found above the current directory)
+  std::string work;                          ///< fields and results (default <repo>/build/hil-work)
+  std::string goldens;                       ///< golden directory (default hil/goldens)
+  std::string palpad;                        ///< palpad binary (default: next to palpa in the build tree)
+  std::vector<std::string> emulator;         ///< prefix for palpad, e.g. qemu-aarch64 -L /
   std::optional<double> k, max_force, rate;  ///< overrides of the cases' settings
-  std::string report_dir;              ///< report: output directory
+  std::string report_dir;                    ///< report: output directory
 };
 /// `action`: run | bless | report. Exit 0 all pass, 1 a mismatch or a broken invariant, 2 bad input.
 int RunHil(const HilArgs& args, const std::string& action);
@@ -121,7 +123,7 @@ struct BenchLatencyArgs {
   int cpu = -1;           ///< pin both to this CPU; -1: not pinned
   std::string palpad;     ///< palpad binary (default: next to palpa, the build tree's, or PATH)
   bool cyclictest = true;
-  int rounds = 5;         ///< the two alternate in this many segments of seconds/rounds each
+  int rounds = 5;  ///< the two alternate in this many segments of seconds/rounds each
 };
 /// Exit 0 (the figures are reported, not judged), 1 if palpad could not run.
 int RunBenchLatency(const BenchLatencyArgs& args);

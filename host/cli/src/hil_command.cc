@@ -489,13 +489,20 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
   m.slope_limit_n = lim.slope_factor * k * m.max_hip_step_m + lim.slope_floor_n;
   double energy = 0, bound = 0;
   std::size_t worst_phi_tick = 0, worst_slope_tick = 0;
+  // The proxy is not run during an e-stop, and restarts at the HIP after it, following the HIP
+  // with zero force until the HIP has been outside once (proxy::ProxyTick): "never inside"
+  // holds from then on. Unseated ticks are not checked (a trace starts outside: seated at once).
+  bool seated = false;
   for (std::size_t i = 0; i < ticks.size(); ++i) {
     const Tick& t = ticks[i];
     const Eigen::Vector3d f(t.force[0], t.force[1], t.force[2]);
     const Eigen::Vector3d proxy(t.proxy[0], t.proxy[1], t.proxy[2]);
     m.contact_ticks += t.contact ? 1 : 0;
     m.max_force_n = std::max(m.max_force_n, f.norm());
-    const double phi_voxels = field.Phi(proxy) / voxel;
+    if ((t.flags & kTelemetryFlagEstop) != 0) seated = false;
+    if (!seated)
+      seated = (t.flags & kTelemetryFlagEstop) == 0 && field.Phi(Eigen::Vector3d(t.hip[0], t.hip[1], t.hip[2])) >= 0;
+    const double phi_voxels = seated ? field.Phi(proxy) / voxel : m.min_proxy_phi_voxels;
     if (phi_voxels < m.min_proxy_phi_voxels) {
       m.min_proxy_phi_voxels = phi_voxels;
       worst_phi_tick = i;
@@ -931,15 +938,15 @@ int RunCases(Context& cx, const std::string& action) {
       loaded->view = *view;
     }
     const FieldSampler sampler(loaded->view);
+    // Timing and telemetry flags from palpad --record-timing (both modes).
+    const auto timing = ReadTiming(replay->dir / "timing.csv");
+    for (std::size_t i = 0; i < timing.size() && i < replay->ticks.size(); ++i)
+      replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & kGoldenFlags);
     Metrics m = Measure(replay->ticks, c, sampler, cx.k, cx.max_force, cx.suite.limits);
     if (replay->exit_code != c.expect_exit)
       m.failures.push_back(fmt::format("palpad exited {} (expected {}): {}", replay->exit_code, c.expect_exit,
                                        Replace(replay->stderr_text.substr(0, 400), "\n", " | ")));
     std::string recorded_note;
-    // Timing and telemetry flags from palpad --record-timing (both modes).
-    const auto timing = ReadTiming(replay->dir / "timing.csv");
-    for (std::size_t i = 0; i < timing.size() && i < replay->ticks.size(); ++i)
-      replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & kGoldenFlags);
     std::size_t estop_ticks = 0, estop_force_ticks = 0;
     std::vector<std::int64_t> wake, compute, total;
     for (std::size_t i = 0; i < timing.size(); ++i) {
@@ -955,6 +962,8 @@ int RunCases(Context& cx, const std::string& action) {
     if (estop_force_ticks > 0)
       m.failures.push_back(
           fmt::format("e-stop asserted on {} ticks, {} of them with non-zero force", estop_ticks, estop_force_ticks));
+    if (estop_ticks == 0 && std::ranges::find(c.palpad, "--estop") != c.palpad.end())
+      m.failures.push_back("the case wires an e-stop but no tick saw it asserted");
     const Percentiles pw = Figures(wake), pc = Figures(compute), pt = Figures(total);
     all_wake.insert(all_wake.end(), wake.begin(), wake.end());
     all_compute.insert(all_compute.end(), compute.begin(), compute.end());

@@ -37,9 +37,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
   b.method = "hermite";  // the default (docs/field-methods.md)
-  build->add_option("--method", b.method,
-                    "Distance method: hermite (sub-voxel, default), edt (signed EDT of the packing), erosion "
-                    "(paper eq. 4)")
+  build
+      ->add_option("--method", b.method,
+                   "Distance method: hermite (sub-voxel, default), edt (signed EDT of the packing), erosion "
+                   "(paper eq. 4)")
       ->capture_default_str()
       ->check(CLI::IsMember({"hermite", "edt", "erosion"}));
   build->add_option("--threads", b.threads, "Worker threads (0: all cores)")
@@ -80,6 +81,14 @@ int main(int argc, char** argv) {
   synth->add_option("--count", t.count, "poke-grid pokes; taps/attempts without --speeds; free waypoints")
       ->capture_default_str()
       ->check(CLI::Range(1, 400));
+  synth
+      ->add_option("--button", t.button_window,
+                   "START,END: hold button --button-bit over [START, END) s (e-stop cases)")
+      ->expected(2)
+      ->delimiter(',')
+      ->check(CLI::Range(0.0, 1e6));
+  synth->add_option("--button-bit", t.button_bit, "Button bit for --button (Falcon grip: 0-3)")
+      ->check(CLI::Range(0, 7));
   synth->add_option("--tremor", t.tremor_m, "RMS of an added 8-12 Hz tremor, m (sub-millimetre)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 0.001));

@@ -581,6 +581,16 @@ int RunTraceSynth(const TraceSynthArgs& a) {
     return kExitBadInput;
   }
   auto& samples = synth.samples();
+  if (!a.button_window.empty()) {
+    if (!(a.button_window[0] < a.button_window[1])) {
+      fmt::print(stderr, "palpa trace synth: --button {},{}: the window is empty\n", a.button_window[0],
+                 a.button_window[1]);
+      return kExitBadInput;
+    }
+    for (auto& s : samples)
+      if (s.t_s >= a.button_window[0] && s.t_s < a.button_window[1])
+        s.buttons = static_cast<std::uint8_t>(s.buttons | (1u << a.button_bit));
+  }
   if (auto ok = trace::CheckSamples(samples); !ok) {
     fmt::print(stderr, "palpa trace synth: the {} trace breaks the trace rules: {}\n", a.kind, ok.error().message);
     return kExitBadInput;
@@ -595,6 +605,8 @@ int RunTraceSynth(const TraceSynthArgs& a) {
   if (!a.speeds.empty()) command += fmt::format(" --speeds {}", fmt::join(a.speeds, ","));
   command += fmt::format(" --length {} --speed {} --count {} --through {} --tremor {}", a.stroke_m, a.speed_m_s,
                          a.count, a.through_m, a.tremor_m);
+  if (!a.button_window.empty())
+    command += fmt::format(" --button {},{} --button-bit {}", a.button_window[0], a.button_window[1], a.button_bit);
   // The field by file name only, so the trace does not depend on where it was built.
   const std::string comment = command + "\nfield " + a.field.substr(a.field.find_last_of('/') + 1) + "\n" + note;
 

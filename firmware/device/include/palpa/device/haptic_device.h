@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 
 namespace palpa::device {
 
@@ -23,6 +24,7 @@ enum class IoStatus {
 struct HipReading {
   std::array<double, 3> hip_m{};  ///< haptic interface point, m
   double t_s = 0;                 ///< device time of the sample, s since the device started (replay time for a replay)
+  std::uint8_t buttons = 0;       ///< button bitmask (Falcon grip: bits 0-3; a replay: the trace's column); 0 if none
 };
 
 /// NVI interface: the public non-virtual Read/Write check what crosses the boundary, the private
@@ -39,8 +41,13 @@ class HapticDevice {
   IoStatus Read(HipReading& out) {
     const IoStatus s = DoRead(out);
     if (s == IoStatus::kOk && !(IsFinite(out.hip_m) && std::isfinite(out.t_s))) return IoStatus::kError;
+    if (s == IoStatus::kOk) last_buttons_ = out.buttons;
     return s;
   }
+
+  /// The buttons of the last successful Read (0 before any): what a button wired as an input (an
+  /// e-stop or dead-man grip button, palpad --estop button:N) reads. Servo thread only.
+  std::uint8_t last_buttons() const { return last_buttons_; }
 
   /// Commands `force_n` (N, device frame). A non-finite component is a programming error upstream:
   /// the device gets zero force instead and the call reports kError. RT-safe per the contract above.
@@ -59,6 +66,8 @@ class HapticDevice {
 
   virtual IoStatus DoRead(HipReading& out) = 0;
   virtual IoStatus DoWrite(const std::array<double, 3>& force_n) = 0;
+
+  std::uint8_t last_buttons_ = 0;
 };
 
 }  // namespace palpa::device

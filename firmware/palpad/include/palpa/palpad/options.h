@@ -46,15 +46,16 @@ struct Options {
   double priority = 80;                ///< --priority: SCHED_FIFO priority of the servo thread, 1..99
   double overrun_limit = 10;           ///< --overrun-limit: consecutive overruns → fault; 0: never
   double watchdog_ms = 50;             ///< --watchdog-ms: a tick running longer trips the watchdog; 0: off
-  std::string estop;                   ///< --estop CHIP:LINE (raw text; parsed into estop_line)
-  std::string estop_active = "high";   ///< --estop-active high|low
-  double estop_debounce = 5;           ///< --estop-debounce: released reads (ticks) before a release counts
-  double ramp_ms = 500;                ///< --ramp-ms: force ramp after an e-stop release, ms
-  std::string tick_gpio;               ///< --tick-gpio CHIP:LINE (raw text; parsed into tick_line)
-  bool check_config = false;           ///< --check-config: validate the options, print them, exit
+  std::string estop;  ///< --estop CHIP:LINE or button:N (raw text; parsed into estop_line / estop_button)
+  std::string estop_active = "high";  ///< --estop-active high|low
+  double estop_debounce = 5;          ///< --estop-debounce: released reads (ticks) before a release counts
+  double ramp_ms = 500;               ///< --ramp-ms: force ramp after an e-stop release, ms
+  std::string tick_gpio;              ///< --tick-gpio CHIP:LINE (raw text; parsed into tick_line)
+  bool check_config = false;          ///< --check-config: validate the options, print them, exit
 
   // Parsed from the above by ParseArgs.
   std::optional<gpio::LineSpec> estop_line;
+  int estop_button = -1;  ///< --estop button:N: the device's grip button N (0..7) is the e-stop; -1 none
   bool estop_active_high = true;
   std::optional<gpio::LineSpec> tick_line;
 };

@@ -78,6 +78,7 @@ struct TelemetrySample {
   std::int64_t wake_latency_ns = -1;  ///< paced: wake time − deadline, ns; −1 when not paced
   std::int64_t compute_ns = 0;        ///< wake-up (or Step start) to after the force write, ns
   std::uint32_t flags = 0;            ///< TelemetryFlag bits
+  std::uint8_t buttons = 0;           ///< the device's buttons this tick (HipReading::buttons), for --record
 };
 static_assert(std::is_trivially_copyable_v<TelemetrySample>);
 
