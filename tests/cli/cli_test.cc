@@ -13,44 +13,17 @@
 
 #include "palpa/blob/blob.h"
 #include "palpa/trace/trace.h"
+#include "process.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Outcome {
-  int code = -1;
-  std::string out;  // stdout and stderr together
-};
+using palpa::test_support::Outcome;
 
-Outcome Palpa(const std::string& args) {
-  const std::string cmd = std::string(PALPA_BIN) + " " + args + " 2>&1";
-  Outcome r;
-  std::FILE* p = ::popen(cmd.c_str(), "r");
-  if (p == nullptr) return r;
-  std::array<char, 4096> buf;
-  std::size_t n = 0;
-  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+Outcome Palpa(const std::string& args) { return palpa::test_support::Run(std::string(PALPA_BIN) + " " + args); }
 
-class Cli : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("palpa-cli-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string Path(const std::string& leaf) const { return (dir_ / leaf).string(); }
-  std::string Write(const std::string& leaf, const std::string& text) const {
-    std::ofstream(Path(leaf)) << text;
-    return Path(leaf);
-  }
-  fs::path dir_;
-};
+using Cli = palpa::test_support::TempDirTest;
 
 constexpr const char* kFourPoints = "0 0 0 0 0 -1\n1 0 0 1 0 0\n0 1 0 0 1 0\n0 0 1 0 0 1\n";
 

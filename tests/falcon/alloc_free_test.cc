@@ -1,8 +1,8 @@
 // Proves the Falcon servo tick (FalconDevice: codec, re-framing, encoder checks, forward
 // kinematics, force → counts; the virtual Falcon's transfers and mechanics) allocation- and
-// lock-free, including the fault ticks. Same interposer as tests/firmware/alloc_free_test.cc:
-// global operator new/delete replaced, malloc & co. and pthread_mutex_lock wrapped at link time;
-// the last tests prove the counters see a call.
+// lock-free, including the fault ticks, with the probe of tests/support/alloc_probe.h (global
+// operator new/delete replaced, malloc & co. and pthread_mutex_lock wrapped at link time); the
+// last tests prove the counters see a call.
 
 #include <gtest/gtest.h>
 #include <pthread.h>
@@ -16,133 +16,21 @@
 #include <new>
 #include <vector>
 
+#include "alloc_probe.h"
 #include "palpa/device_falcon/falcon_device.h"
 #include "palpa/device_virtual_falcon/virtual_falcon.h"
 #include "palpa/proxy/proxy.h"
 #include "palpa/servo/servo_loop.h"
 #include "sphere_fixture.h"
 
-namespace {
-
-thread_local bool g_armed = false;
-std::atomic<long> g_allocs{0};
-std::atomic<long> g_frees{0};
-std::atomic<long> g_locks{0};
-
-void CountAlloc() {
-  if (g_armed) g_allocs.fetch_add(1, std::memory_order_relaxed);
-}
-void CountFree() {
-  if (g_armed) g_frees.fetch_add(1, std::memory_order_relaxed);
-}
-
-void* AllocOrThrow(std::size_t n) {
-  CountAlloc();
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* AllocAligned(std::size_t n, std::align_val_t al) {
-  CountAlloc();
-  const auto a = static_cast<std::size_t>(al);
-  const std::size_t size = ((n == 0 ? 1 : n) + a - 1) / a * a;  // aligned_alloc wants a multiple
-  return std::aligned_alloc(a, size);
-}
-void* AllocAlignedOrThrow(std::size_t n, std::align_val_t al) {
-  if (void* p = AllocAligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void Release(void* p) {
-  CountFree();
-  std::free(p);
-}
-
-// RAII arming of the counters on this thread.
-class Armed {
- public:
-  Armed() { g_armed = true; }
-  ~Armed() { g_armed = false; }
-  Armed(const Armed&) = delete;
-  Armed& operator=(const Armed&) = delete;
-};
-
-void ResetCounters() {
-  g_allocs = 0;
-  g_frees = 0;
-  g_locks = 0;
-}
-
-}  // namespace
-
-// ---- replaced global allocation functions (all forms) ----
-void* operator new(std::size_t n) { return AllocOrThrow(n); }
-void* operator new[](std::size_t n) { return AllocOrThrow(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  CountAlloc();
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  CountAlloc();
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* operator new(std::size_t n, std::align_val_t al) { return AllocAlignedOrThrow(n, al); }
-void* operator new[](std::size_t n, std::align_val_t al) { return AllocAlignedOrThrow(n, al); }
-void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept { return AllocAligned(n, al); }
-void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept { return AllocAligned(n, al); }
-void operator delete(void* p) noexcept { Release(p); }
-void operator delete[](void* p) noexcept { Release(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete(void* p, std::size_t) noexcept { Release(p); }
-void operator delete[](void* p, std::size_t) noexcept { Release(p); }
-void operator delete(void* p, std::align_val_t) noexcept { Release(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { Release(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { Release(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { Release(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { Release(p); }
-
-// ---- link-time wraps (-Wl,--wrap=NAME routes our objects' NAME to __wrap_NAME) ----
-extern "C" {
-void* __real_malloc(std::size_t n);
-void* __real_calloc(std::size_t n, std::size_t size);
-void* __real_realloc(void* p, std::size_t n);
-void __real_free(void* p);
-void* __real_aligned_alloc(std::size_t al, std::size_t n);
-int __real_posix_memalign(void** out, std::size_t al, std::size_t n);
-int __real_pthread_mutex_lock(pthread_mutex_t* m);
-
-void* __wrap_malloc(std::size_t n) {
-  CountAlloc();
-  return __real_malloc(n);
-}
-void* __wrap_calloc(std::size_t n, std::size_t size) {
-  CountAlloc();
-  return __real_calloc(n, size);
-}
-void* __wrap_realloc(void* p, std::size_t n) {
-  CountAlloc();
-  return __real_realloc(p, n);
-}
-void __wrap_free(void* p) {
-  CountFree();
-  __real_free(p);
-}
-void* __wrap_aligned_alloc(std::size_t al, std::size_t n) {
-  CountAlloc();
-  return __real_aligned_alloc(al, n);
-}
-int __wrap_posix_memalign(void** out, std::size_t al, std::size_t n) {
-  CountAlloc();
-  return __real_posix_memalign(out, al, n);
-}
-int __wrap_pthread_mutex_lock(pthread_mutex_t* m) {
-  if (g_armed) g_locks.fetch_add(1, std::memory_order_relaxed);
-  return __real_pthread_mutex_lock(m);
-}
-}
-
 namespace palpa {
 namespace {
+
+using alloc_probe::Armed;
+using alloc_probe::g_allocs;
+using alloc_probe::g_frees;
+using alloc_probe::g_locks;
+using alloc_probe::ResetCounters;
 
 using device_virtual_falcon::FaultKind;
 using device_virtual_falcon::FaultSpec;

@@ -1,9 +1,9 @@
 // Proves the runtime paths of the servo tick allocation-, lock- and system-call-free: e-stop
 // assertion, debounced release and force ramp, the tick line, telemetry pushes into a full ring
 // (drops), consecutive overruns into the fault state, and a fault requested by the watchdog.
-// Global operator new/delete are replaced and malloc & co., pthread_mutex_lock and the system
-// calls a loop could slip in (sleeps, read/write, sched_yield) are wrapped at link
-// time (-Wl,--wrap=…, see CMakeLists.txt); while `g_armed` is set, each call is counted. On the
+// The probe of tests/support/alloc_probe.h replaces global operator new/delete and wraps malloc &
+// co., pthread_mutex_lock and the system calls a loop could slip in (sleeps, read/write,
+// sched_yield) at link time; while armed, each call is counted. On the
 // simulated clock the loop needs no system call at all, so any call is a finding. The detector
 // tests at the end prove that the counters see a call. (The base tick's test is alloc_free_test.cc.)
 
@@ -18,126 +18,21 @@
 #include <cstdlib>
 #include <new>
 
+#include "alloc_probe.h"
 #include "palpa/gpio_sim/sim_gpio.h"
 #include "palpa/proxy/proxy.h"
 #include "palpa/servo/servo_loop.h"
 #include "runtime_fixtures.h"
 #include "sphere_fixture.h"
 
-namespace {
-
-thread_local bool g_armed = false;
-std::atomic<long> g_allocs{0};
-std::atomic<long> g_locks{0};
-std::atomic<long> g_syscalls{0};
-
-void CountAlloc() {
-  if (g_armed) g_allocs.fetch_add(1, std::memory_order_relaxed);
-}
-void CountSyscall() {
-  if (g_armed) g_syscalls.fetch_add(1, std::memory_order_relaxed);
-}
-
-class Armed {
- public:
-  Armed() { g_armed = true; }
-  ~Armed() { g_armed = false; }
-  Armed(const Armed&) = delete;
-  Armed& operator=(const Armed&) = delete;
-};
-
-void ResetCounters() {
-  g_allocs = 0;
-  g_locks = 0;
-  g_syscalls = 0;
-}
-
-}  // namespace
-
-// ---- replaced global allocation functions ----
-void* operator new(std::size_t n) {
-  CountAlloc();
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  CountAlloc();
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, std::align_val_t al) {
-  CountAlloc();
-  const auto a = static_cast<std::size_t>(al);
-  if (void* p = std::aligned_alloc(a, ((n == 0 ? 1 : n) + a - 1) / a * a)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t al) { return operator new(n, al); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-
-// ---- link-time wraps ----
-extern "C" {
-void* __real_malloc(std::size_t n);
-void* __real_calloc(std::size_t n, std::size_t size);
-void* __real_realloc(void* p, std::size_t n);
-int __real_pthread_mutex_lock(pthread_mutex_t* m);
-int __real_clock_nanosleep(clockid_t c, int flags, const timespec* t, timespec* rem);
-int __real_nanosleep(const timespec* t, timespec* rem);
-int __real_usleep(useconds_t us);
-int __real_sched_yield();
-ssize_t __real_write(int fd, const void* buf, std::size_t n);
-ssize_t __real_read(int fd, void* buf, std::size_t n);
-
-void* __wrap_malloc(std::size_t n) {
-  CountAlloc();
-  return __real_malloc(n);
-}
-void* __wrap_calloc(std::size_t n, std::size_t size) {
-  CountAlloc();
-  return __real_calloc(n, size);
-}
-void* __wrap_realloc(void* p, std::size_t n) {
-  CountAlloc();
-  return __real_realloc(p, n);
-}
-int __wrap_pthread_mutex_lock(pthread_mutex_t* m) {
-  if (g_armed) g_locks.fetch_add(1, std::memory_order_relaxed);
-  return __real_pthread_mutex_lock(m);
-}
-int __wrap_clock_nanosleep(clockid_t c, int flags, const timespec* t, timespec* rem) {
-  CountSyscall();
-  return __real_clock_nanosleep(c, flags, t, rem);
-}
-int __wrap_nanosleep(const timespec* t, timespec* rem) {
-  CountSyscall();
-  return __real_nanosleep(t, rem);
-}
-int __wrap_usleep(useconds_t us) {
-  CountSyscall();
-  return __real_usleep(us);
-}
-int __wrap_sched_yield() {
-  CountSyscall();
-  return __real_sched_yield();
-}
-ssize_t __wrap_write(int fd, const void* buf, std::size_t n) {
-  CountSyscall();
-  return __real_write(fd, buf, n);
-}
-ssize_t __wrap_read(int fd, void* buf, std::size_t n) {
-  CountSyscall();
-  return __real_read(fd, buf, n);
-}
-}
-
 namespace palpa {
 namespace {
+
+using alloc_probe::Armed;
+using alloc_probe::g_allocs;
+using alloc_probe::g_locks;
+using alloc_probe::g_syscalls;
+using alloc_probe::ResetCounters;
 
 using firmware_test::FakeClock;
 using firmware_test::SphereField;

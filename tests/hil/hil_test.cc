@@ -15,28 +15,16 @@
 #include <string>
 
 #include "palpa/trace/trace.h"
+#include "process.h"
 #include "recorder.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int code = -1;
-  std::string out;
-};
+using Result = palpa::test_support::Outcome;
 
-Result Palpa(const std::string& args) {
-  const std::string cmd = std::string(PALPA_BIN) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, p)) > 0;) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+Result Palpa(const std::string& args) { return palpa::test_support::Run(std::string(PALPA_BIN) + " " + args); }
 
 const std::string kCases = std::string(PALPA_SOURCE_DIR) + "/hil/cases.toml";
 const std::string kWork = PALPA_HIL_WORK;

@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "palpa/mesh/triangle_mesh.h"
+#include "process.h"
 
 namespace palpa::tools_test {
 
@@ -24,41 +25,11 @@ namespace fs = std::filesystem;
 
 inline fs::path DataFile(const std::string& name) { return fs::path(PALPA_DATA_DIR) / name; }
 
-struct Outcome {
-  int code = -1;
-  std::string out;  // stdout and stderr together
-};
+using test_support::Outcome;
+using test_support::TempDirTest;
 
 /// Runs `palpa ARGS` through the shell and captures its output and exit code.
-inline Outcome Palpa(const std::string& args) {
-  const std::string cmd = std::string(PALPA_BIN) + " " + args + " 2>&1";
-  Outcome r;
-  std::FILE* p = ::popen(cmd.c_str(), "r");
-  if (p == nullptr) return r;
-  std::array<char, 4096> buf;
-  std::size_t n = 0;
-  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-/// A per-test directory under the system temp dir, removed afterwards.
-class TempDirTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("palpa-tools-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string Path(const std::string& leaf) const { return (dir_ / leaf).string(); }
-  std::string Write(const std::string& leaf, const std::string& text) const {
-    std::ofstream(Path(leaf), std::ios::binary) << text;
-    return Path(leaf);
-  }
-  fs::path dir_;
-};
+inline Outcome Palpa(const std::string& args) { return test_support::Run(std::string(PALPA_BIN) + " " + args); }
 
 inline std::string ReadText(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -12,6 +12,7 @@
 // Every trace is checked against the reader's rules (workspace, monotonic time) before writing.
 #include <algorithm>
 #include <cmath>
+#include <expected>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -220,14 +221,20 @@ class Synth {
     return std::nullopt;
   }
 
-  std::optional<SynthError> PokeOrStroke(std::string& note) {
+  // A random touch point, with the trace started at rest kStandoffM above it along the normal.
+  std::expected<Touch, SynthError> StartAboveRandomTouch() {
     auto touch = RandomTouch();
-    if (!touch) return SynthError{"no surface (φ = 0) found in the field"};
-    const auto [surface, normal, ray_unused] = *touch;
-    (void)ray_unused;
-    const Vector3d start = surface + kStandoffM * normal;
-    t_.Start(start);
+    if (!touch) return std::unexpected(SynthError{"no surface (φ = 0) found in the field"});
+    t_.Start(touch->surface + kStandoffM * touch->normal);
     t_.Rest(kRestS);
+    return *touch;
+  }
+
+  std::optional<SynthError> PokeOrStroke(std::string& note) {
+    const auto touch = StartAboveRandomTouch();
+    if (!touch) return touch.error();
+    const Vector3d surface = touch->surface, normal = touch->normal;
+    const Vector3d start = surface + kStandoffM * normal;
     t_.Move(surface - Depth() * normal, kApproachS);
     Vector3d end = start;
     if (a_.kind == "poke") {
@@ -498,13 +505,10 @@ class Synth {
 
   // Grid-edge crossings and a poke deeper than the narrow band.
   std::optional<SynthError> Excursion(std::string& note) {
-    auto touch = RandomTouch();
-    if (!touch) return SynthError{"no surface (φ = 0) found in the field"};
-    const auto [surface, normal, ray_unused] = *touch;
-    (void)ray_unused;
+    const auto touch = StartAboveRandomTouch();
+    if (!touch) return touch.error();
+    const Vector3d surface = touch->surface, normal = touch->normal;
     const Vector3d start = surface + kStandoffM * normal;
-    t_.Start(start);
-    t_.Rest(kRestS);
     // 1. Out of the grid through each face the workspace leaves room beyond, and back.
     Vector3d lo, hi;
     TravelBox(lo, hi);

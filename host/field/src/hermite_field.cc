@@ -18,6 +18,8 @@
 #include <Eigen/Geometry>
 #include <nanoflann.hpp>
 
+#include "point_cloud.h"
+
 namespace palpa::field {
 namespace {
 
@@ -41,19 +43,8 @@ constexpr float kCullSlackVoxels = 0.01f;
 // Lipschitz projection, never left as a jump.
 constexpr float kCentreTestMarginVoxels = 1.0f;
 
-struct PointCloud {
-  const std::vector<V3>* points;
-  std::size_t kdtree_get_point_count() const { return points->size(); }
-  double kdtree_get_pt(std::size_t idx, std::size_t dim) const {
-    return (*points)[idx][static_cast<Eigen::Index>(dim)];
-  }
-  template <class BBox>
-  bool kdtree_get_bbox(BBox& /*bb*/) const {
-    return false;
-  }
-};
-using KdTree =
-    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
+using detail::KdTree;
+using detail::PointCloud;
 
 // nanoflann result set for GuardPacking's radius search: keeps, unsorted, the samples j != i within
 // the search radius whose plane the ball (centre, r) pokes through by more than `tolerance`.

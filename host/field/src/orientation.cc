@@ -11,6 +11,8 @@
 #include <tbb/parallel_for.h>
 #include <nanoflann.hpp>
 
+#include "point_cloud.h"
+
 namespace palpa::field {
 namespace {
 
@@ -22,19 +24,8 @@ constexpr double kFlatSin = 0.17364817766693033;  // sin(10 degrees)
 constexpr double kOppositeCos = -0.5;
 constexpr double kFlippedFraction = 0.01;
 
-struct PointCloud {
-  const std::vector<V3>* points;
-  std::size_t kdtree_get_point_count() const { return points->size(); }
-  double kdtree_get_pt(std::size_t idx, std::size_t dim) const {
-    return (*points)[idx][static_cast<Eigen::Index>(dim)];
-  }
-  template <class BBox>
-  bool kdtree_get_bbox(BBox& /*bb*/) const {
-    return false;
-  }
-};
-using KdTree =
-    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
+using detail::KdTree;
+using detail::PointCloud;
 
 }  // namespace
 

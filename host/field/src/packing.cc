@@ -10,6 +10,8 @@
 #include <tbb/parallel_for.h>
 #include <nanoflann.hpp>
 
+#include "point_cloud.h"
+
 namespace palpa::field {
 namespace {
 
@@ -64,20 +66,8 @@ double BruteForceRadius(const std::vector<Eigen::Vector3d>& positions, const std
   return r;
 }
 
-struct PointCloud {
-  const std::vector<Eigen::Vector3d>* points;
-  std::size_t kdtree_get_point_count() const { return points->size(); }
-  double kdtree_get_pt(std::size_t idx, std::size_t dim) const {
-    return (*points)[idx][static_cast<Eigen::Index>(dim)];
-  }
-  template <class BBox>
-  bool kdtree_get_bbox(BBox& /*bb*/) const {
-    return false;
-  }
-};
-
-using KdTree =
-    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
+using detail::KdTree;
+using detail::PointCloud;
 
 // nanoflann result set that keeps only min_j r_ij over the points it is offered, avoiding a
 // result vector per query.
