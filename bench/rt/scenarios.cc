@@ -23,6 +23,7 @@ std::unique_ptr<Field> Finish(std::vector<std::byte> bytes, const std::string& n
   auto view = blob::Verify(f->bytes);
   if (!view) Die(name + ": " + view.error().what());
   f->view = *view;
+  f->stored_view = *view;
   f->sampler = std::make_unique<sampler::TrilinearSampler>(f->view);
   return f;
 }
@@ -78,7 +79,17 @@ bool Project(const Float64Field& f, Vec3d& x, Vec3d& normal) {
 std::unique_ptr<Field> LoadField(const std::string& path) {
   auto bytes = blob::ReadFile(path.c_str());
   if (!bytes) Die(path + ": " + bytes.error().what());
-  return Finish(std::move(*bytes), path);
+  auto f = Finish(std::move(*bytes), path);
+  auto stored = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
+  if (!stored) Die(path + ": " + stored.error().what());
+  if (*stored != f->bytes) {  // v2: the fixed-point tick samples the bricks in place, as palpad
+    f->stored_bytes = std::move(*stored);
+    auto view = blob::Verify(f->stored_bytes);
+    if (!view) Die(path + ": " + view.error().what());
+    f->stored_view = *view;
+    f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
+  }
+  return f;
 }
 
 std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox) {

@@ -16,10 +16,15 @@
 
 namespace palpa::bench {
 
-/// A verified blob kept in place with its sampler. Not movable (the view points into `bytes`).
+/// A verified blob kept in place with its sampler. Not movable (the views point into the bytes).
+/// `sampler` reads the blob as stored, as palpad does (a v2 blob's bricks in place); `view` is
+/// the dense v1 form of the same values (identical for a v1 blob), which the float64 reference
+/// and the scenario builders index directly.
 struct Field {
   std::vector<std::byte> bytes;
   blob::FieldView view;
+  std::vector<std::byte> stored_bytes;  ///< empty: `bytes` is the stored form
+  blob::FieldView stored_view;
   std::unique_ptr<sampler::TrilinearSampler> sampler;
 };
 

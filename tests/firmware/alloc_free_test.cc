@@ -1,7 +1,7 @@
-// Proves the servo tick allocation- and lock-free: every global operator new/delete form is
-// replaced here and malloc/calloc/realloc/free/aligned_alloc/posix_memalign/pthread_mutex_lock
-// are wrapped at link time (-Wl,--wrap=…, see CMakeLists.txt). While `g_armed` is set on a thread,
-// each call is counted. Replacing operator new catches allocations made inside libstdc++.so
+// Proves the servo tick allocation- and lock-free with the probe of tests/support/alloc_probe.h:
+// every global operator new/delete form is replaced and malloc/calloc/realloc/free/aligned_alloc/
+// posix_memalign/pthread_mutex_lock are wrapped at link time. While a thread is armed, each call
+// is counted. Replacing operator new catches allocations made inside libstdc++.so
 // (which --wrap alone misses); --wrap catches direct C calls in our objects
 // (/work/shared/notes/cross-rt.md §5). The sibling tests prove the counters see a call, and
 // DISABLED_MustFail.AllocationInsideArmedProxyTicks, run by ctest as
@@ -13,140 +13,30 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <mutex>
 #include <new>
+#include <thread>
 #include <vector>
 
+#include "alloc_probe.h"
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/proxy/proxy.h"
 #include "palpa/sampler/trilinear.h"
 #include "palpa/servo/servo_loop.h"
 #include "sphere_fixture.h"
 
-namespace {
-
-thread_local bool g_armed = false;
-std::atomic<long> g_allocs{0};
-std::atomic<long> g_frees{0};
-std::atomic<long> g_locks{0};
-
-void CountAlloc() {
-  if (g_armed) g_allocs.fetch_add(1, std::memory_order_relaxed);
-}
-void CountFree() {
-  if (g_armed) g_frees.fetch_add(1, std::memory_order_relaxed);
-}
-
-void* AllocOrThrow(std::size_t n) {
-  CountAlloc();
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* AllocAligned(std::size_t n, std::align_val_t al) {
-  CountAlloc();
-  const auto a = static_cast<std::size_t>(al);
-  const std::size_t size = ((n == 0 ? 1 : n) + a - 1) / a * a;  // aligned_alloc wants a multiple
-  return std::aligned_alloc(a, size);
-}
-void* AllocAlignedOrThrow(std::size_t n, std::align_val_t al) {
-  if (void* p = AllocAligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void Release(void* p) {
-  CountFree();
-  std::free(p);
-}
-
-// RAII arming of the counters on this thread.
-class Armed {
- public:
-  Armed() { g_armed = true; }
-  ~Armed() { g_armed = false; }
-  Armed(const Armed&) = delete;
-  Armed& operator=(const Armed&) = delete;
-};
-
-void ResetCounters() {
-  g_allocs = 0;
-  g_frees = 0;
-  g_locks = 0;
-}
-
-}  // namespace
-
-// ---- replaced global allocation functions (all forms) ----
-void* operator new(std::size_t n) { return AllocOrThrow(n); }
-void* operator new[](std::size_t n) { return AllocOrThrow(n); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  CountAlloc();
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  CountAlloc();
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* operator new(std::size_t n, std::align_val_t al) { return AllocAlignedOrThrow(n, al); }
-void* operator new[](std::size_t n, std::align_val_t al) { return AllocAlignedOrThrow(n, al); }
-void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept { return AllocAligned(n, al); }
-void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept { return AllocAligned(n, al); }
-void operator delete(void* p) noexcept { Release(p); }
-void operator delete[](void* p) noexcept { Release(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete(void* p, std::size_t) noexcept { Release(p); }
-void operator delete[](void* p, std::size_t) noexcept { Release(p); }
-void operator delete(void* p, std::align_val_t) noexcept { Release(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { Release(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { Release(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { Release(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { Release(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { Release(p); }
-
-// ---- link-time wraps (-Wl,--wrap=NAME routes our objects' NAME to __wrap_NAME) ----
-extern "C" {
-void* __real_malloc(std::size_t n);
-void* __real_calloc(std::size_t n, std::size_t size);
-void* __real_realloc(void* p, std::size_t n);
-void __real_free(void* p);
-void* __real_aligned_alloc(std::size_t al, std::size_t n);
-int __real_posix_memalign(void** out, std::size_t al, std::size_t n);
-int __real_pthread_mutex_lock(pthread_mutex_t* m);
-
-void* __wrap_malloc(std::size_t n) {
-  CountAlloc();
-  return __real_malloc(n);
-}
-void* __wrap_calloc(std::size_t n, std::size_t size) {
-  CountAlloc();
-  return __real_calloc(n, size);
-}
-void* __wrap_realloc(void* p, std::size_t n) {
-  CountAlloc();
-  return __real_realloc(p, n);
-}
-void __wrap_free(void* p) {
-  CountFree();
-  __real_free(p);
-}
-void* __wrap_aligned_alloc(std::size_t al, std::size_t n) {
-  CountAlloc();
-  return __real_aligned_alloc(al, n);
-}
-int __wrap_posix_memalign(void** out, std::size_t al, std::size_t n) {
-  CountAlloc();
-  return __real_posix_memalign(out, al, n);
-}
-int __wrap_pthread_mutex_lock(pthread_mutex_t* m) {
-  if (g_armed) g_locks.fetch_add(1, std::memory_order_relaxed);
-  return __real_pthread_mutex_lock(m);
-}
-}
-
 namespace palpa {
 namespace {
+
+using alloc_probe::Armed;
+using alloc_probe::g_allocs;
+using alloc_probe::g_frees;
+using alloc_probe::g_locks;
+using alloc_probe::ResetCounters;
 
 using device::HapticDevice;
 using device::HipReading;
@@ -211,6 +101,59 @@ TEST(AllocFreeTick, ServoStepAllocatesNothingAndTakesNoLock) {
   EXPECT_EQ(g_locks.load(), 0);
 }
 
+// Field swaps (issue 7): a second thread offers two prepared fields alternately while the loop
+// ticks through a press-slide-leave; the ticks that take a field (one exchange, the proxy re-seed,
+// the force cross-fade) allocate, free and lock nothing. Only the servo thread is armed: the
+// offering thread is the non-RT side.
+TEST(AllocFreeTick, FieldSwapTicksAllocateNothingAndTakeNoLock) {
+  const SphereField field;
+  const SphereField other(64, 18, 6, 0.5e-3, {32.0, 32.2, 31.8});  // a different sphere, same frame
+  const servo::ServoField fields[2] = {servo::ServoField(other.view(), Params(other.voxel_m())),
+                                       servo::ServoField(field.view(), Params(field.voxel_m()))};
+  device_sim::SimDevice device(firmware_test::PressSlideLeaveTrace(field), 1000.0);
+  std::atomic<bool> stop{false};
+  servo::ServoConfig config;
+  config.telemetry_capacity = device.TickCount();
+  config.overrun_fault_limit = 0;
+  config.swap_ramp_ticks = 20;
+  servo::ServoLoop loop(field.view(), Params(field.voxel_m()), device, config, stop);
+
+  std::atomic<bool> done{false};
+  std::atomic<int> offers{0};
+  std::thread offerer([&] {
+    int i = 0;
+    while (!done.load(std::memory_order_acquire)) {
+      const std::uint64_t epoch = loop.field_epoch();
+      (void)loop.OfferField(&fields[i % 2]);
+      while (loop.field_epoch() == epoch && !done.load(std::memory_order_acquire)) std::this_thread::yield();
+      offers.fetch_add(1, std::memory_order_relaxed);
+      ++i;
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+  });
+  ResetCounters();
+  servo::StepResult last = servo::StepResult::kRunning;
+  {
+    const Armed armed;
+    while (last == servo::StepResult::kRunning) {
+      last = loop.Step();
+      // Pace the replay a little so the offers interleave with contact ticks.
+      const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(20);
+      while (std::chrono::steady_clock::now() < until) {
+      }
+    }
+  }
+  done.store(true, std::memory_order_release);
+  offerer.join();
+  EXPECT_EQ(last, servo::StepResult::kEnded);
+  EXPECT_GT(loop.counters().field_swaps, 20u) << "the swaps must interleave with the replay";
+  EXPECT_GT(loop.counters().swap_seeds, 0u) << "some swaps must land with the HIP inside the new sphere";
+  EXPECT_GT(loop.counters().contact_ticks, 1000u);
+  EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(g_frees.load(), 0);
+  EXPECT_EQ(g_locks.load(), 0);
+}
+
 TEST(AllocFreeTick, DeviceErrorTickAllocatesNothing) {
   const SphereField field;
   FailingDevice device(field, 50);
@@ -250,13 +193,13 @@ TEST(AllocFreeTick, PacedRunAllocatesNothing) {
   EXPECT_EQ(g_locks.load(), 0);
 }
 
-TEST(AllocFreeTick, MillionProxyTicksInContactAndFreeSpaceAllocateNothing) {
-  // The real-time core on its own (issue 6): 1,000,000 proxy ticks, the 10 s press, slide and
-  // leave over the sphere at 1 kHz cycled 100 times (free space, first contact, sliding, leaving), with
-  // the passivity observer, armed throughout. The HIP positions are converted before arming.
-  const SphereField field;
-  const sampler::TrilinearSampler sampler(field.view());
-  const proxy::GridFrame frame = proxy::GridFrame::Of(field.view());
+// The real-time core on its own (issue 6): 1,000,000 proxy ticks, the 10 s press, slide and
+// leave over the sphere at 1 kHz cycled 100 times (free space, first contact, sliding, leaving),
+// with the passivity observer, armed throughout, sampling `view` (the sphere as v1 or v2). The
+// HIP positions are converted before arming.
+void MillionProxyTicksAllocateNothing(const SphereField& field, const blob::FieldView& view) {
+  const sampler::TrilinearSampler sampler(view);
+  const proxy::GridFrame frame = proxy::GridFrame::Of(view);
   const proxy::ProxyParams params = Params(field.voxel_m());
   // The trace has a sample every 10 ms; the ticks are 1 ms apart, so interpolate 10 per interval.
   const auto trace = firmware_test::PressSlideLeaveTrace(field);
@@ -291,6 +234,27 @@ TEST(AllocFreeTick, MillionProxyTicksInContactAndFreeSpaceAllocateNothing) {
   EXPECT_EQ(g_allocs.load(), 0);
   EXPECT_EQ(g_frees.load(), 0);
   EXPECT_EQ(g_locks.load(), 0);
+}
+
+TEST(AllocFreeTick, MillionProxyTicksInContactAndFreeSpaceAllocateNothing) {
+  const SphereField field;
+  MillionProxyTicksAllocateNothing(field, field.view());
+}
+
+// The same ticks sampling blob v2's bricks in place (index, octant tables, free-space bounds).
+TEST(AllocFreeTick, MillionProxyTicksOnBlobV2AllocateNothing) {
+  const SphereField field;
+  blob::BlobMetaV2 meta;
+  meta.meta.dims = {static_cast<std::uint32_t>(field.view().dims[0]), static_cast<std::uint32_t>(field.view().dims[1]),
+                    static_cast<std::uint32_t>(field.view().dims[2])};
+  meta.meta.origin_m = field.view().origin_m;
+  meta.meta.voxel_m = field.view().voxel_m;
+  meta.meta.point_count = 1;
+  const std::vector<std::byte> bytes = blob::EncodeV2(meta, blob::DenseQ16(field.view()));
+  const auto v2 = blob::Verify(bytes);
+  ASSERT_TRUE(v2.has_value()) << v2.error().what();
+  ASSERT_EQ(v2->phi, nullptr) << "expected the brick storage";
+  MillionProxyTicksAllocateNothing(field, *v2);
 }
 
 // The detector itself: without these passing, a 0 above proves nothing.

@@ -28,6 +28,32 @@ TEST(PalpadOptions, DefaultsAndRequiredOptions) {
   EXPECT_TRUE(o->summary_json_path.empty());
 }
 
+// Upload options (issue 7; docs/upload.md).
+TEST(PalpadOptions, ListenNeedsAKeyAndParsesHostAndPort) {
+  const auto o = Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "127.0.0.1:0", "--key-file", "k",
+                        "--max-blob", "1000000", "--swap-ramp-ms", "20"});
+  ASSERT_TRUE(o.has_value()) << o.error();
+  EXPECT_EQ(o->listen_host, "127.0.0.1");
+  EXPECT_EQ(o->listen_port, 0);
+  EXPECT_EQ(o->max_blob, 1000000);
+  EXPECT_EQ(o->swap_ramp_ms, 20);
+  const auto v6 = Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "[::1]:7700", "--key-file", "k"});
+  ASSERT_TRUE(v6.has_value()) << v6.error();
+  EXPECT_EQ(v6->listen_host, "::1");
+  EXPECT_EQ(v6->listen_port, 7700);
+  const auto no_key = Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "127.0.0.1:7700"});
+  ASSERT_FALSE(no_key.has_value());
+  EXPECT_NE(no_key.error().find("--listen needs --key-file"), std::string::npos) << no_key.error();
+  EXPECT_FALSE(Parse({"--field", "f", "--trace", "t", "--out", "o", "--key-file", "k"}).has_value());
+  EXPECT_FALSE(
+      Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "host", "--key-file", "k"}).has_value());
+  EXPECT_FALSE(
+      Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "h:70000", "--key-file", "k"}).has_value());
+  EXPECT_FALSE(
+      Parse({"--field", "f", "--trace", "t", "--out", "o", "--listen", "h:1", "--key-file", "k", "--max-blob", "100"})
+          .has_value());
+}
+
 TEST(PalpadOptions, SimulatedDeviceIsTheDefault) {
   const auto o = Parse({"--field", "f.palpa", "--trace", "t.csv", "--out", "o.csv"});
   ASSERT_TRUE(o.has_value()) << o.error();
@@ -145,6 +171,10 @@ TEST(PalpadOptions, EstopOnAGripButton) {
   const auto none = Parse({"--field", "f", "--trace", "t", "--out", "o"});
   ASSERT_TRUE(none.has_value()) << none.error();
   EXPECT_EQ(none->estop_button, -1);
+  const auto swap = Parse({"--field", "f", "--trace", "t", "--out", "o", "--swap-at", "1500:/tmp/a:b.palpa"});
+  ASSERT_TRUE(swap.has_value()) << swap.error();
+  EXPECT_EQ(swap->swap_at_tick, 1500u);
+  EXPECT_EQ(swap->swap_at_field, "/tmp/a:b.palpa");  // the first colon splits: paths may hold colons
 }
 
 TEST(PalpadOptions, RuntimeErrors) {
@@ -164,6 +194,9 @@ TEST(PalpadOptions, RuntimeErrors) {
       {{"--estop", "button:8"}, "--estop button:N needs a button bit N in 0..7"},
       {{"--estop", "button:"}, "--estop button:N needs a button bit N in 0..7"},
       {{"--estop", "button:12"}, "--estop button:N needs a button bit N in 0..7"},
+      {{"--swap-at", "f.palpa"}, "--swap-at 'f.palpa': expected TICK:FIELD.palpa"},
+      {{"--swap-at", "-1:f.palpa"}, "expected TICK:FIELD.palpa"},
+      {{"--swap-at", "12:"}, "expected TICK:FIELD.palpa"},
   };
   for (const auto& [extra, message] : cases) {
     std::vector<const char*> args = {"--field", "f", "--trace", "t", "--out", "o"};

@@ -19,6 +19,8 @@
 #include "palpa/blob/blob.h"
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/gpio_linux/gpiod_lines.h"
+#include "palpa/net/client.h"
+#include "palpa/net_server/listener.h"
 #include "palpa/palpad/options.h"
 #include "palpa/proxy/proxy.h"
 #include "palpa/rt/realtime.h"
@@ -28,6 +30,7 @@
 #include "palpa/servo/watchdog.h"
 #include "palpa/trace/trace.h"
 #include "recorder.h"
+#include "scripted_swap.h"
 
 namespace {
 
@@ -67,11 +70,68 @@ void OnWatchdogTrip(void*, std::int64_t stalled_ns) {
 }
 
 int Run(const palpa::palpad::Options& o) {
-  // Field: read, then verify every byte before anything uses it. `blob` outlives the loop.
-  auto blob = palpa::blob::ReadFile(o.field_path.c_str());
-  if (!blob) return Fail(kExitBadInput, o.field_path + ": " + blob.error().what());
-  const auto field = palpa::blob::Verify(*blob);
-  if (!field) return Fail(kExitBadInput, o.field_path + ": " + field.error().what());
+  palpa::proxy::ProxyConfig config;
+  config.k_n_per_m = o.k_n_per_m;
+  config.max_force_n = o.max_force_n;
+
+  // --listen (docs/upload.md): the listener owns the field's buffer and a spare of --max-blob
+  // each, allocated now; the start-up field is read into the first.
+  std::unique_ptr<palpa::net_server::UploadListener> listener;
+  palpa::servo::TelemetryDrain* live_drain = nullptr;  // set once the drain exists
+  std::atomic<bool> loop_running{false};
+  palpa::servo::ServoLoop* live_loop = nullptr;
+  std::vector<std::byte> blob;  // without --listen: the field file; outlives the loop
+  palpa::blob::FieldView field_view;
+  if (!o.listen.empty()) {
+    auto key = palpa::net::ReadKeyFile(o.key_file);
+    if (!key) return Fail(kExitBadInput, "--key-file " + key.error().message);
+    palpa::net_server::ListenerConfig lc;
+    lc.host = o.listen_host;
+    lc.port = static_cast<std::uint16_t>(o.listen_port);
+    lc.key = *key;
+    lc.max_blob = static_cast<std::uint64_t>(o.max_blob);
+    lc.read_timeout_ms = static_cast<std::int64_t>(o.net_timeout_ms);
+    lc.proxy = config;
+    lc.avoid_cpu = static_cast<int>(o.cpu);
+    lc.log = [](const std::string& line) { std::fprintf(stderr, "palpad: %s\n", line.c_str()); };
+    lc.fill_status = [&](palpa::net::ControllerStatus& st) {
+      st.rate_hz = o.rate_hz;
+      st.running = loop_running.load(std::memory_order_acquire);
+      if (live_loop != nullptr) st.dropped = live_loop->telemetry().dropped();
+      if (live_drain == nullptr) return;
+      const palpa::servo::DrainStatus d = live_drain->LiveStatus();
+      st.ticks = d.samples + st.dropped;
+      st.overruns = d.overruns;
+      st.max_tick_ns = d.max_compute_ns;
+      st.force_clamps = d.force_clamps;
+      st.estops = d.estop_events;
+      st.contact_ticks = d.contact_ticks;
+      st.last_tick = d.last_tick;
+      st.t_s = d.t_s;
+      st.hip_m = d.hip_m;
+      st.proxy_m = d.proxy_m;
+      st.force_n = d.force_n;
+      st.contact = d.contact;
+      st.swap_ramp = d.swap_ramp;
+    };
+    auto created = palpa::net_server::UploadListener::Create(std::move(lc));
+    if (!created) return Fail(kExitBadInput, created.error());
+    listener = std::move(*created);
+    auto loaded = listener->LoadInitial(o.field_path);
+    if (!loaded) return Fail(kExitBadInput, loaded.error());
+    field_view = *loaded;
+    std::fprintf(stderr, "palpad: listening on %s:%u (uploads up to %.0f bytes)\n", o.listen_host.c_str(),
+                 static_cast<unsigned>(listener->port()), o.max_blob);
+  } else {
+    // Field: read as stored (a v2 blob is sampled in place), then verify every byte before
+    // anything uses it. `blob` outlives the loop.
+    auto file = palpa::blob::ReadFile(o.field_path.c_str(), palpa::blob::Load::kAsStored);
+    if (!file) return Fail(kExitBadInput, o.field_path + ": " + file.error().what());
+    blob = std::move(*file);
+    const auto field = palpa::blob::Verify(blob);
+    if (!field) return Fail(kExitBadInput, o.field_path + ": " + field.error().what());
+    field_view = *field;
+  }
 
   std::vector<palpa::trace::TraceSample> samples;  // the real Falcon is moved by hand: no trace
   if (o.device != "falcon") {
@@ -80,11 +140,22 @@ int Run(const palpa::palpad::Options& o) {
     samples = std::move(*read);
   }
 
-  palpa::proxy::ProxyConfig config;
-  config.k_n_per_m = o.k_n_per_m;
-  config.max_force_n = o.max_force_n;
-  const auto params = palpa::proxy::MakeProxyParams(config, field->voxel_m);
+  const auto params = palpa::proxy::MakeProxyParams(config, field_view.voxel_m);
   if (!params) return Fail(kExitBadInput, std::string("parameters: ") + params.error());
+
+  // --swap-at N:FIELD: the second field, read and verified now like the first.
+  std::vector<std::byte> swap_blob;
+  std::optional<palpa::servo::ServoField> swap_field;
+  if (!o.swap_at_field.empty()) {
+    auto file = palpa::blob::ReadFile(o.swap_at_field.c_str(), palpa::blob::Load::kAsStored);
+    if (!file) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + file.error().what());
+    swap_blob = std::move(*file);
+    const auto view = palpa::blob::Verify(swap_blob);
+    if (!view) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + view.error().what());
+    const auto swap_params = palpa::proxy::MakeProxyParams(config, view->voxel_m);
+    if (!swap_params) return Fail(kExitBadInput, std::string("--swap-at parameters: ") + swap_params.error());
+    swap_field.emplace(*view, *swap_params, swap_blob.size());
+  }
 
   // Open the output now so that an unwritable path fails before the run, not after it.
   // /dev/null (a service running for hours): no CSV at all.
@@ -137,7 +208,16 @@ int Run(const palpa::palpad::Options& o) {
   sc.estop_release_ticks = static_cast<std::uint32_t>(o.estop_debounce);
   sc.ramp_ticks = static_cast<std::uint32_t>(std::llround(o.ramp_ms * 1e-3 * o.rate_hz));
   sc.tick_line = tick_line.get();
-  palpa::servo::ServoLoop loop(*field, *params, *device, sc, g_stop);
+  sc.swap_ramp_ticks = static_cast<std::uint32_t>(std::llround(o.swap_ramp_ms * 1e-3 * o.rate_hz));
+  std::optional<palpa::palpad::ScriptedSwapDevice> scripted_swap;
+  if (swap_field) {
+    scripted_swap.emplace(*device, *swap_field, o.swap_at_tick);
+    device = &*scripted_swap;
+  }
+  palpa::servo::ServoLoop loop(field_view, *params, *device, sc, g_stop);
+  if (scripted_swap) scripted_swap->Attach(loop);
+  live_loop = &loop;
+  if (listener) listener->Attach(loop);
 
   InstallStopHandlers();
   if (falcon) {
@@ -153,7 +233,12 @@ int Run(const palpa::palpad::Options& o) {
     // Everything the loop reads or writes: its ring and histograms, and the field it samples.
     const auto loop_buffers = loop.buffers();
     std::vector<std::span<const std::byte>> buffers(loop_buffers.begin(), loop_buffers.end());
-    buffers.emplace_back(std::span<const std::byte>(*blob));
+    if (listener) {
+      for (const auto b : listener->buffers()) buffers.emplace_back(b);
+    } else {
+      buffers.emplace_back(std::span<const std::byte>(blob));
+    }
+    if (!swap_blob.empty()) buffers.emplace_back(std::span<const std::byte>(swap_blob));
     palpa::rt::RtRequest request;
     request.cpu = static_cast<int>(o.cpu);
     request.priority = static_cast<int>(o.priority);
@@ -194,9 +279,17 @@ int Run(const palpa::palpad::Options& o) {
       return Fail(kExitRunFailed, std::string("cannot start the watchdog thread: ") + std::strerror(err));
   }
 
+  live_drain = &drain;
+  if (listener) {
+    if (const int err = listener->Start(); err != 0)
+      return Fail(kExitRunFailed, std::string("cannot start the listener thread: ") + std::strerror(err));
+  }
+  loop_running.store(true, std::memory_order_release);
   const palpa::servo::RunEnd end = loop.Run(o.fast, o.rate_hz);
+  loop_running.store(false, std::memory_order_release);
 
   // After the run: non-RT again.
+  if (listener) listener->Stop();
   watchdog.Stop();
   drain.Stop(palpa::servo::RunEndName(end));
   if (recorder) {

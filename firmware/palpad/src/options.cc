@@ -49,6 +49,12 @@ const OptionSpec kSpecs[] = {
     {"--ramp-ms", nullptr, &Options::ramp_ms},
     {"--tick-gpio", &Options::tick_gpio},
     {"--check-config", nullptr, nullptr, &Options::check_config},
+    {"--listen", &Options::listen},
+    {"--key-file", &Options::key_file},
+    {"--max-blob", nullptr, &Options::max_blob},
+    {"--swap-ramp-ms", nullptr, &Options::swap_ramp_ms},
+    {"--swap-at", &Options::swap_at},
+    {"--net-timeout-ms", nullptr, &Options::net_timeout_ms},
 };
 constexpr std::size_t kSpecCount = std::size(kSpecs);
 
@@ -135,6 +141,38 @@ std::expected<void, std::string> CheckRuntime(Options& o, const bool (&given)[kS
   }
   if (o.estop_line && o.tick_line && o.estop_line->chip == o.tick_line->chip && o.estop_line->line == o.tick_line->line)
     return std::unexpected("--estop and --tick-gpio name the same line");
+  if (!(o.swap_ramp_ms >= 0 && o.swap_ramp_ms <= 10000)) return std::unexpected("--swap-ramp-ms must be in 0..10000");
+  if (!o.swap_at.empty()) {
+    const auto colon = o.swap_at.find(':');
+    auto tick = ParseNumber(
+        "--swap-at", colon == std::string::npos ? std::string_view{} : std::string_view(o.swap_at).substr(0, colon));
+    if (colon == std::string::npos || colon + 1 == o.swap_at.size() || !tick || !WholeIn(*tick, 0, 1e12))
+      return std::unexpected("--swap-at '" + o.swap_at + "': expected TICK:FIELD.palpa, TICK a whole number ≥ 0");
+    o.swap_at_tick = static_cast<std::uint64_t>(*tick);
+    o.swap_at_field = o.swap_at.substr(colon + 1);
+  }
+  if (!o.listen.empty()) {
+    const auto colon = o.listen.rfind(':');
+    std::string host = colon == std::string::npos ? "" : o.listen.substr(0, colon);
+    if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+    double port = -1;
+    if (colon != std::string::npos) {
+      auto n = ParseNumber("--listen", o.listen.substr(colon + 1));
+      if (n) port = *n;
+    }
+    if (host.empty() || !WholeIn(port, 0, 65535))
+      return std::unexpected("--listen '" + o.listen + "': expected HOST:PORT, port 0..65535 (0: any free port)");
+    o.listen_host = host;
+    o.listen_port = static_cast<int>(port);
+    if (o.key_file.empty()) return std::unexpected("--listen needs --key-file (palpa keygen -o KEY)");
+    if (!WholeIn(o.max_blob, 144, 1073741824.0))
+      return std::unexpected("--max-blob must be a whole number of bytes in 144..1073741824");
+    if (!(o.net_timeout_ms >= 10 && o.net_timeout_ms <= 600000))
+      return std::unexpected("--net-timeout-ms must be in 10..600000");
+  } else {
+    for (const char* option : {"--key-file", "--max-blob", "--net-timeout-ms"})
+      if (was_given(option)) return std::unexpected(std::string(option) + " needs --listen");
+  }
   return {};
 }
 
@@ -186,6 +224,16 @@ const char* Usage() {
          "  --estop-debounce N    released reads (ticks) before a release counts (default 5)\n"
          "  --ramp-ms MS          after a release the force ramps in over MS (default 500)\n"
          "  --tick-gpio CHIP:LINE output toggled every tick (measure period and jitter with a scope)\n"
+         "\n"
+         "Upload (docs/upload.md):\n"
+         "  --listen HOST:PORT    accept field uploads and status requests while the loop runs\n"
+         "                        (port 0: any free port, printed on stderr)\n"
+         "  --key-file PATH       shared key (palpa keygen), mode 0600; required with --listen\n"
+         "  --max-blob BYTES      largest field accepted; two buffers this size are allocated at\n"
+         "                        start-up (default 67108864 = 64 MiB)\n"
+         "  --swap-ramp-ms MS     after a field swap the force ramps in over MS (default 50)\n"
+         "  --swap-at N:FIELD     replays: swap to FIELD on tick N (as an upload would, on a known tick)\n"
+         "  --net-timeout-ms MS   header deadline and body idle limit per request (default 2000)\n"
          "  --help                this text\n"
          "\n"
          "exit: 0 ok, 1 device error, fault or output not written, 2 bad input, 3 device not available\n";

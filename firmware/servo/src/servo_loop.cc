@@ -1,5 +1,7 @@
 #include "palpa/servo/servo_loop.h"
 
+#include <algorithm>
+#include <climits>
 #include <cmath>
 #include <ctime>
 
@@ -12,6 +14,48 @@ constexpr std::int64_t kFullRingWaitNs = 100'000;  // lockstep replay waiting fo
 void Nap() {
   timespec ts{0, kFullRingWaitNs};
   nanosleep(&ts, nullptr);
+}
+
+// Restarts the proxy in a new field at the HIP `hip` (grid Q16.16). A HIP outside the object
+// (φ ≥ 0) restarts it there (ProxyState reset, exact). A HIP inside is projected onto the surface
+// by Newton steps p ← p − φ ∇φ/|∇φ|² (at most kSeedSteps samples, bounded), then nudged out to
+// φ ≥ 0; if that lands on the surface (0 ≤ φ ≤ near, a readable gradient) the proxy is seeded
+// there, seated, so the force k·(X_p − X_h) resumes under the swap ramp; otherwise (deeper than
+// the band, no gradient) it restarts at the HIP and gives no force until the HIP has been outside
+// (proxy.h). RT-safe: integer arithmetic, ≤ kSeedSteps + 2 samples. Returns true when seeded.
+constexpr int kSeedSteps = 8;
+bool SeedProxy(const ServoField& f, sampler::GridPos hip, proxy::ProxyState& state) {
+  state = proxy::ProxyState{};
+  sampler::GridPos p = hip;
+  sampler::Sample s = f.sampler.At(p);
+  if (!s.in_grid || s.phi >= 0) return false;
+  constexpr std::int64_t kMinGrad2 = (std::int64_t{1} << 32) / 16;  // |∇φ| ≥ 1/4 voxel/voxel, Q32
+  constexpr std::int32_t kClose = 1 << 10;                          // 1/64 voxel
+  for (int step = 0; step < kSeedSteps + 2; ++step) {
+    const std::int64_t g2 =
+        std::int64_t{s.grad[0]} * s.grad[0] + std::int64_t{s.grad[1]} * s.grad[1] + std::int64_t{s.grad[2]} * s.grad[2];
+    if (g2 < kMinGrad2) return false;
+    if (s.phi >= 0 && s.phi <= f.params.near_q16) {
+      state.proxy = p;
+      state.phi = s.phi;
+      state.last_hip = hip;
+      state.seated = true;
+      state.valid = true;
+      return true;
+    }
+    // Aim a little outside (+1/64 voxel) so the last step lands at φ ≥ 0 rather than just below.
+    const std::int64_t target = std::int64_t{s.phi} - kClose;
+    std::array<std::int32_t*, 3> axes = {&p.x, &p.y, &p.z};
+    for (std::size_t a = 0; a < 3; ++a) {
+      const std::int64_t d = (target * s.grad[a] * 65536) / g2;  // |φ|,|g| < 2^23: < 2^62
+      const std::int64_t moved = std::int64_t{*axes[a]} - d;
+      *axes[a] = static_cast<std::int32_t>(std::clamp<std::int64_t>(moved, INT32_MIN, INT32_MAX));
+    }
+    s = f.sampler.At(p);
+    if (!s.in_grid) return false;
+  }
+  state = proxy::ProxyState{};
+  return false;
 }
 
 }  // namespace
@@ -62,8 +106,7 @@ const char* RunEndName(RunEnd e) {
 
 ServoLoop::ServoLoop(const blob::FieldView& field, const proxy::ProxyParams& params, device::HapticDevice& device,
                      const ServoConfig& config, const std::atomic<bool>& stop)
-    : sampler_(field),
-      params_(params),
+    : initial_(field, params),
       frame_(proxy::GridFrame::Of(field)),
       device_(device),
       config_(config),
@@ -91,6 +134,7 @@ void ServoLoop::RequestFault(FaultCause cause) noexcept {
 }
 
 void ServoLoop::WriteZeroForce() {
+  last_force_n_ = {0.0, 0.0, 0.0};
   if (device_.Write({0.0, 0.0, 0.0}) == device::IoStatus::kError) ++counters_.device_errors;
 }
 
@@ -163,6 +207,7 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
     return result;
   }
 
+  TakeOfferedField(reading, s.flags);
   s.row.t_s = reading.t_s;
   s.row.hip_m = reading.hip_m;
   s.buttons = reading.buttons;
@@ -172,7 +217,7 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
     s.row.proxy_m = reading.hip_m;  // the proxy restarts here on release
     ++counters_.estop_ticks;
   } else {
-    const proxy::TickResult r = proxy::ProxyTick(sampler_, params_, state_, frame_.ToGrid(reading.hip_m));
+    const proxy::TickResult r = proxy::ProxyTick(field_->sampler, field_->params, state_, frame_.ToGrid(reading.hip_m));
     // Q16.16 → double is exact (|raw| < 2^31 fits a 53-bit mantissa).
     force_n = {r.force[0].value.ToDouble(), r.force[1].value.ToDouble(), r.force[2].value.ToDouble()};
     if (loop_state_ == LoopState::kRamp) {
@@ -181,6 +226,16 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
       for (double& f : force_n) f *= scale;
       s.flags |= kFlagRamp;
       if (ramp_tick_ >= config_.ramp_ticks) loop_state_ = LoopState::kRunning;
+    }
+    if (swap_ramping_) {
+      // Cross-fade from the force written just before the swap to the new field's: no step at the
+      // swap, and every tick moves at most |f_new − f_hold|/ramp_ticks ≤ 2·max_force/ramp_ticks
+      // more than the new field's own change.
+      ++swap_ramp_tick_;
+      const double scale = static_cast<double>(swap_ramp_tick_) / static_cast<double>(config_.swap_ramp_ticks);
+      for (std::size_t a = 0; a < 3; ++a) force_n[a] = (1.0 - scale) * swap_hold_n_[a] + scale * force_n[a];
+      s.flags |= kFlagSwapRamp;
+      if (swap_ramp_tick_ >= config_.swap_ramp_ticks) swap_ramping_ = false;
     }
     s.row.proxy_m = frame_.ToMetres(r.proxy);
     s.row.contact = r.contact;
@@ -195,6 +250,7 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
     }
   }
   s.row.force_n = force_n;
+  last_force_n_ = force_n;
   const device::IoStatus write_status = device_.Write(force_n);
   const std::int64_t end_ns = clock_.NowNs();
   s.compute_ns = end_ns - start_ns;
@@ -213,6 +269,22 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
   }
   tick_seq_.fetch_add(1, std::memory_order_acq_rel);  // even: between ticks
   return result;
+}
+
+// At the start of a tick, before the proxy runs: the one exchange that hands a new field over.
+void ServoLoop::TakeOfferedField(const device::HipReading& reading, std::uint32_t& flags) {
+  if (offered_.load(std::memory_order_relaxed) == nullptr) return;  // the common case: one load
+  const ServoField* next = offered_.exchange(nullptr, std::memory_order_acq_rel);
+  if (next == nullptr) return;  // withdrawn in between
+  field_ = next;
+  frame_ = next->frame;
+  if (SeedProxy(*next, frame_.ToGrid(reading.hip_m), state_)) ++counters_.swap_seeds;
+  swap_ramp_tick_ = 0;
+  swap_hold_n_ = last_force_n_;
+  swap_ramping_ = config_.swap_ramp_ticks > 0;
+  flags |= kFlagSwap;
+  ++counters_.field_swaps;
+  field_epoch_.fetch_add(1, std::memory_order_acq_rel);  // acknowledged: the old field is no longer read
 }
 
 void ServoLoop::Publish() {

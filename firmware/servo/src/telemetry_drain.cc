@@ -40,9 +40,15 @@ void TelemetryDrain::Stop(const char* final_state) {
   (void)WriteStatus(final_state);
 }
 
+DrainStatus TelemetryDrain::LiveStatus() const {
+  const std::lock_guard<std::mutex> lock(live_mutex_);
+  return live_;
+}
+
 bool TelemetryDrain::DrainOnce() {
   TelemetrySample s;
   int n = 0;
+  bool was_estop = status_.estop;
   while (n < kBatch && ring_.Pop(s)) {
     ++n;
     if (config_.sink != nullptr) config_.sink->Consume(s);
@@ -64,6 +70,18 @@ bool TelemetryDrain::DrainOnce() {
     st.overruns += (s.flags & kFlagOverrun) != 0 ? 1 : 0;
     if (s.wake_latency_ns > st.max_wake_latency_ns) st.max_wake_latency_ns = s.wake_latency_ns;
     if (s.compute_ns > st.max_compute_ns) st.max_compute_ns = s.compute_ns;
+    if (st.estop && !was_estop) ++st.estop_events;
+    was_estop = st.estop;
+    st.hip_m = s.row.hip_m;
+    st.proxy_m = s.row.proxy_m;
+    st.contact = s.row.contact;
+    st.swap_ramp = (s.flags & kFlagSwapRamp) != 0;
+    st.force_clamps += (s.flags & kFlagClamped) != 0 ? 1 : 0;
+    st.field_swaps += (s.flags & kFlagSwap) != 0 ? 1 : 0;
+  }
+  if (n > 0) {
+    const std::lock_guard<std::mutex> lock(live_mutex_);
+    live_ = status_;
   }
   return n > 0;
 }

@@ -19,6 +19,7 @@
 #include <array>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -110,11 +111,10 @@ std::optional<Histogram> ReadHistogram(const std::string& path, std::string& err
   return h;
 }
 
-// Runs argv with stdout and stderr to files; the exit code, or 127 if it could not be started.
-int RunProcess(const std::vector<std::string>& argv, const std::string& out_path, const std::string& err_path) {
+// Starts argv with stdout and stderr to files; the child's pid, or -1.
+pid_t SpawnProcess(const std::vector<std::string>& argv, const std::string& out_path, const std::string& err_path) {
   std::fflush(nullptr);
   const pid_t pid = fork();
-  if (pid < 0) return 127;
   if (pid == 0) {
     if (!std::freopen(out_path.c_str(), "w", stdout) || !std::freopen(err_path.c_str(), "w", stderr)) _exit(127);
     std::vector<char*> args;
@@ -124,10 +124,21 @@ int RunProcess(const std::vector<std::string>& argv, const std::string& out_path
     std::fprintf(stderr, "cannot run %s: %s\n", args[0], std::strerror(errno));
     _exit(127);
   }
+  return pid;
+}
+
+// Waits for a spawned child: its exit code, 128 + signal, or 127 if it never started.
+int WaitProcess(pid_t pid) {
+  if (pid < 0) return 127;
   int status = 0;
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+// Runs argv with stdout and stderr to files; the exit code, or 127 if it could not be started.
+int RunProcess(const std::vector<std::string>& argv, const std::string& out_path, const std::string& err_path) {
+  return WaitProcess(SpawnProcess(argv, out_path, err_path));
 }
 
 std::string ReadText(const std::string& path) {
@@ -135,6 +146,56 @@ std::string ReadText(const std::string& path) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+// --with-viewer (issue 11): one palpad segment with `palpa view --connect` polling its status
+// channel (~40 Hz) from palpad's first listening moment to its end.
+struct ViewerSegment {
+  std::string error;  // empty: ran
+  std::uint64_t polls = 0, failed = 0;
+  double seconds = 0;
+  std::string last_failure;  // the viewer's last failed poll, if any
+};
+ViewerSegment RunWithViewer(const std::vector<std::string>& pa, const std::string& self, const std::string& field,
+                            const std::string& key, const std::string& dir) {
+  ViewerSegment seg;
+  const std::string perr = dir + "/palpad-viewer.err", verr = dir + "/viewer.err";
+  std::remove(perr.c_str());  // else the previous round's port could be read before the child truncates it
+  const pid_t pd = SpawnProcess(pa, dir + "/palpad-viewer.out", perr);
+  std::string endpoint;
+  for (int i = 0; i < 400 && endpoint.empty(); ++i) {  // palpad prints its port at start-up
+    const std::string err = ReadText(perr);
+    if (const auto at = err.find("listening on "); at != std::string::npos) {
+      const auto end = err.find_first_of(" \n", at + 13);
+      endpoint = err.substr(at + 13, end == std::string::npos ? std::string::npos : end - at - 13);
+    } else {
+      usleep(5000);
+    }
+  }
+  if (endpoint.empty()) {
+    kill(pd, SIGTERM);
+    WaitProcess(pd);
+    seg.error = "palpad --listen did not report its port: " + Trim(ReadText(perr));
+    return seg;
+  }
+  const pid_t view =
+      SpawnProcess({self, "view", field, "--connect", endpoint, "--key-file", key, "--bind", "127.0.0.1:0"},
+                   dir + "/viewer.out", verr);
+  const int pc = WaitProcess(pd);
+  kill(view, SIGTERM);
+  const int vc = WaitProcess(view);
+  const std::string vtext = ReadText(verr);
+  const auto at = vtext.find("live: ");
+  if (pc != 0) {
+    seg.error = fmt::format("palpad failed (exit {}): {}", pc, Trim(ReadText(perr)));
+  } else if (vc != 0 || at == std::string::npos ||
+             std::sscanf(vtext.c_str() + at, "live: %lu status polls (%lu failed) in %lf s", &seg.polls, &seg.failed,
+                         &seg.seconds) != 3) {
+    seg.error = fmt::format("palpa view --connect failed (exit {}): {}", vc, Trim(vtext));
+  }
+  if (const auto f = vtext.find("last failure: "); f != std::string::npos)
+    seg.last_failure = Trim(vtext.substr(f + 14, vtext.find('\n', f) - f - 14));
+  return seg;
 }
 
 bool IsExecutable(const std::string& path) { return access(path.c_str(), X_OK) == 0; }
@@ -228,7 +289,8 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
     std::string dir;
     ~Cleanup() {
       for (const char* f : {"field.palpa", "trace.csv", "palpad.hist", "palpad.out", "palpad.err", "cyclictest.hist",
-                            "cyclictest.out", "cyclictest.err"})
+                            "cyclictest.out", "cyclictest.err", "status.key", "palpad-viewer.hist", "palpad-viewer.out",
+                            "palpad-viewer.err", "viewer.out", "viewer.err"})
         std::remove((dir + "/" + f).c_str());
       rmdir(dir.c_str());
     }
@@ -271,6 +333,22 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
                                  "--latency-histogram",
                                  path("palpad.hist")};
   if (!cpu.empty()) pa.insert(pa.end(), {"--cpu", cpu});
+  // --with-viewer: palpad listens in every segment, so the two rows differ only by the viewer.
+  std::vector<std::string> pa_viewer;
+  std::string self;
+  if (args.with_viewer) {
+    char exe[4096];
+    const ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    self = n > 0 ? std::string(exe, static_cast<std::size_t>(n)) : "palpa";
+    if (const int kc = RunProcess({self, "keygen", "-o", path("status.key")}, path("viewer.out"), path("viewer.err"));
+        kc != 0) {
+      fmt::print(stderr, "palpa bench latency: palpa keygen failed (exit {}): {}\n", kc, ReadText(path("viewer.err")));
+      return kExitIo;
+    }
+    pa.insert(pa.end(), {"--listen", "127.0.0.1:0", "--key-file", path("status.key")});
+    pa_viewer = pa;
+    std::replace(pa_viewer.begin(), pa_viewer.end(), path("palpad.hist"), path("palpad-viewer.hist"));
+  }
   // cyclictest: the same priority, interval, CPU and sample count, its histogram in the same layout.
   const auto interval_us = static_cast<long>(std::lround(1e6 / args.rate_hz));
   const auto loops = static_cast<long>(std::llround(segment_s * args.rate_hz));
@@ -288,7 +366,11 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
                                  "--histfile=" + path("cyclictest.hist")};
   if (!cpu.empty()) ca.insert(ca.end(), {"-a", cpu});
 
-  Histogram loop, anchor;
+  Histogram loop, anchor, viewed;  // viewed: palpad with palpa view --connect attached
+  long long viewed_overruns = 0;
+  std::uint64_t viewer_polls = 0, viewer_failed = 0;
+  double viewer_seconds = 0;
+  std::string viewer_failure;
   bool have_anchor = args.cyclictest;
   std::string anchor_note = args.cyclictest ? "" : "cyclictest not run (--no-cyclictest)";
   std::string palpad_err;
@@ -320,6 +402,25 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
     longest = std::max(longest, std::atoll(h->Palpad("max_consecutive_overruns").c_str()));
     dropped += std::atoll(h->Palpad("dropped_rows").c_str());
 
+    if (args.with_viewer) {
+      const ViewerSegment seg = RunWithViewer(pa_viewer, self, path("field.palpa"), path("status.key"), dir);
+      if (!seg.error.empty()) {
+        fmt::print(stderr, "palpa bench latency --with-viewer: {}\n", seg.error);
+        return kExitIo;
+      }
+      const auto hv = ReadHistogram(path("palpad-viewer.hist"), error);
+      if (!hv) {
+        fmt::print(stderr, "palpa bench latency: {}\n", error);
+        return kExitIo;
+      }
+      Merge(viewed, *hv);
+      viewed_overruns += std::atoll(hv->Palpad("overruns").c_str());
+      viewer_polls += seg.polls;
+      viewer_failed += seg.failed;
+      viewer_seconds += seg.seconds;
+      if (!seg.last_failure.empty()) viewer_failure = seg.last_failure;
+    }
+
     if (!have_anchor) continue;
     const int cc = RunProcess(ca, path("cyclictest.out"), path("cyclictest.err"));
     if (cc == 127) {
@@ -343,7 +444,8 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
   fmt::print("\nwake-up latency, us (nearest rank; 1 us bins, truncated, as cyclictest):\n");
   fmt::print("  {:<22}{:>9}{:>8}{:>8}{:>8}{:>8}{:>9}{:>11}\n", "", "samples", "min", "p50", "p99", "p99.9", "max",
              "overflows");
-  PrintRow("palpad servo loop", loop);
+  PrintRow(args.with_viewer ? "palpad, no viewer" : "palpad servo loop", loop);
+  if (args.with_viewer) PrintRow("palpad + palpa view", viewed);
   if (have_anchor) {
     PrintRow("cyclictest (anchor)", anchor);
     const std::int64_t a99 = anchor.PercentileUs(0.99), l99 = loop.PercentileUs(0.99);
@@ -364,6 +466,19 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
       rounds, static_cast<double>(compute[0]) / 1e3, static_cast<double>(compute[1]) / 1e3,
       static_cast<double>(compute[2]) / 1e3, static_cast<double>(compute[3]) / 1e3);
   fmt::print("palpad overruns: {} (longest run {}), telemetry samples dropped: {}\n", overruns, longest, dropped);
+  if (args.with_viewer) {
+    fmt::print(
+        "viewer: palpa view --connect made {} status requests ({} failed) in {:.1f} s, {:.1f} per second; palpad "
+        "--listen in both rows; overruns with the viewer: {}\n",
+        viewer_polls, viewer_failed, viewer_seconds, static_cast<double>(viewer_polls) / std::max(viewer_seconds, 1e-9),
+        viewed_overruns);
+    if (!viewer_failure.empty())
+      fmt::print("  the viewer's last failed status request (one as palpad exits is expected): {}\n", viewer_failure);
+    const auto p = [](const Histogram& h, double q) { return static_cast<double>(h.PercentileUs(q)); };
+    fmt::print("  with / without viewer: p50 {:.2f}, p99 {:.2f}, max {:.2f}\n",
+               p(viewed, 0.5) / std::max(p(loop, 0.5), 1.0), p(viewed, 0.99) / std::max(p(loop, 0.99), 1.0),
+               static_cast<double>(viewed.max_ns) / std::max(static_cast<double>(loop.max_ns), 1.0));
+  }
 
   fmt::print("\nhistogram, wake-up latency (count per bucket):\n  {:>15}{:>12}{:>12}\n", "us", "palpad",
              have_anchor ? "cyclictest" : "");

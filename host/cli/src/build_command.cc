@@ -1,6 +1,7 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -90,7 +91,8 @@ int RunBuild(const BuildArgs& args) {
   field::BuildOptions options;
   options.grid.cells = args.cells;
   options.grid.voxel_m = args.voxel_m;
-  options.grid.band_voxels = args.band_voxels;
+  // v2 clamps each side to its own band: build the field to the wider of the two.
+  options.grid.band_voxels = args.format == 2 ? std::max(args.band_voxels, args.band_outside) : args.band_voxels;
   options.method = args.method == "erosion" ? field::FieldMethod::kErosion
                    : args.method == "edt"   ? field::FieldMethod::kEdt
                                             : field::FieldMethod::kHermite;
@@ -137,15 +139,27 @@ int RunBuild(const BuildArgs& args) {
   auto blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
   const std::span<std::int32_t> payload(blob_words.get() + kHeaderWords, nodes);
   built.field.WriteQ16(payload);
+  std::vector<std::byte> v2;
+  if (args.format == 2) {
+    // Blob v2: the dense values above, clamped to the asymmetric band and packed into bricks.
+    blob::BlobMetaV2 m2;
+    m2.meta = meta;
+    m2.band_inside = static_cast<std::uint32_t>(args.band_voxels);
+    m2.band_outside = static_cast<std::uint32_t>(args.band_outside);
+    v2 = blob::EncodeV2(m2, payload);
+    blob_words.reset();
+  }
   blob::HeaderV1 header;
   const std::vector<std::byte> empty = blob::Encode(meta, {});  // header fields as Encode sets them
   std::memcpy(&header, empty.data(), sizeof header);
   header.payload_size = nodes * sizeof(std::int32_t);
-  std::memcpy(blob_words.get(), &header, sizeof header);
-  const std::span<const std::byte> bytes(reinterpret_cast<const std::byte*>(blob_words.get()),
-                                         words * sizeof(std::int32_t));
-  header.crc32c = Crc32cFast(bytes.subspan(blob::kHeaderSize), Crc32cFast(bytes.first(blob::kCrcOffset), 0));
-  std::memcpy(blob_words.get(), &header, sizeof header);
+  if (args.format == 1) std::memcpy(blob_words.get(), &header, sizeof header);
+  std::span<const std::byte> bytes(v2);
+  if (args.format == 1) {
+    bytes = {reinterpret_cast<const std::byte*>(blob_words.get()), words * sizeof(std::int32_t)};
+    header.crc32c = Crc32cFast(bytes.subspan(blob::kHeaderSize), Crc32cFast(bytes.first(blob::kCrcOffset), 0));
+    std::memcpy(blob_words.get(), &header, sizeof header);
+  }
   if (auto w = WriteFileAtomically(args.output, bytes); !w) {
     fmt::print(stderr, "palpa build: {}\n", w.error());
     return kExitIo;
@@ -153,15 +167,22 @@ int RunBuild(const BuildArgs& args) {
   const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!args.quiet) {
     fmt::print("{}: {} oriented points → {}\n", args.points, points->positions.size(), args.output);
-    fmt::print("  grid        {} x {} x {} nodes, voxel {:.4f} mm, band {} voxels\n", g.dims[0], g.dims[1], g.dims[2],
-               g.voxel_m * 1e3, g.band_voxels);
+    if (args.format == 2) {
+      fmt::print("  grid        {} x {} x {} nodes, voxel {:.4f} mm, band {} voxels inside, {} outside\n", g.dims[0],
+                 g.dims[1], g.dims[2], g.voxel_m * 1e3, args.band_voxels, args.band_outside);
+    } else {
+      fmt::print("  grid        {} x {} x {} nodes, voxel {:.4f} mm, band {} voxels\n", g.dims[0], g.dims[1], g.dims[2],
+                 g.voxel_m * 1e3, g.band_voxels);
+    }
     fmt::print("  method      {}, {} nodes inside, {} of {} bricks with band values\n",
                field::MethodName(options.method), built.inside_nodes, built.field.AllocatedBricks(),
-               static_cast<std::size_t>(built.field.brick_dims()[0]) * static_cast<std::size_t>(built.field.brick_dims()[1]) *
+               static_cast<std::size_t>(built.field.brick_dims()[0]) *
+                   static_cast<std::size_t>(built.field.brick_dims()[1]) *
                    static_cast<std::size_t>(built.field.brick_dims()[2]));
     fmt::print("  time        {:.3f} s (packing {:.3f} s, indicator {:.3f} s, distance {:.3f} s)\n", total_s,
                built.seconds_packing, built.seconds_indicator, built.seconds_distance);
-    fmt::print("  blob        {} bytes\n", bytes.size());
+    fmt::print("  blob        v{}, {} bytes ({:.2f} % of dense float32)\n", args.format, bytes.size(),
+               100.0 * static_cast<double>(bytes.size()) / (4.0 * static_cast<double>(nodes)));
   }
   return kExitOk;
 }

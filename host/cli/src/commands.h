@@ -23,7 +23,9 @@ struct BuildArgs {
   std::array<double, 3> offset_m{};  ///< with scale
   int cells = 300;                   ///< nodes along the longest axis
   double voxel_m = 0;                ///< > 0: node spacing instead of cells
-  int band_voxels = 6;               ///< narrow band half-width
+  int band_voxels = 6;               ///< narrow band half-width (v2: the inside band)
+  int band_outside = 2;              ///< v2: outside band, voxels (docs/blob-format.md)
+  int format = 2;                    ///< blob version written: 2 (bricks, default) or 1 (dense)
   std::string method = "erosion";
   int threads = 0;  ///< 0: all cores
   bool quiet = false;
@@ -123,9 +125,42 @@ struct BenchLatencyArgs {
   int cpu = -1;           ///< pin both to this CPU; -1: not pinned
   std::string palpad;     ///< palpad binary (default: next to palpa, the build tree's, or PATH)
   bool cyclictest = true;
-  int rounds = 5;  ///< the two alternate in this many segments of seconds/rounds each
+  int rounds = 5;            ///< the two alternate in this many segments of seconds/rounds each
+  bool with_viewer = false;  ///< also run each segment with `palpa view --connect` attached (issue 11)
 };
 /// Exit 0 (the figures are reported, not judged), 1 if palpad could not run.
 int RunBenchLatency(const BenchLatencyArgs& args);
+
+// The browser view (issue 11; library: host/view, docs/view.md): the zero iso-surface, a replay
+// of a palpad run, or a running palpad through its status channel.
+struct ViewArgs {
+  std::string field;                    ///< FIELD.palpa
+  std::string trace;                    ///< palpad output CSV or a HIL result directory ("" none)
+  std::string connect;                  ///< HOST:PORT of palpad --listen ("" none)
+  std::string key_file;                 ///< with connect: the key from palpa keygen
+  std::string bind = "127.0.0.1:8080";  ///< HOST:PORT to serve on (port 0: any free port)
+  std::string assets;                   ///< asset directory override ("" the installed/build-tree one)
+};
+/// Serves until SIGINT/SIGTERM: exit 0; 2 bad input; 1 cannot listen or no assets.
+int RunView(const ViewArgs& args);
+
+// Upload to a running controller (issue 7; docs/upload.md). Exit 0 accepted / answered, 1 the
+// controller refused or could not be reached, 2 bad input (endpoint, key file, blob).
+int RunKeygen(const std::string& output, bool force);
+struct UploadArgs {
+  std::string field;         ///< FIELD.palpa, verified locally before it is sent
+  std::string to;            ///< HOST:PORT of palpad --listen
+  std::string key_file;      ///< shared key, mode 0600
+  int timeout_ms = 10000;    ///< per wait for the controller (connect, each send, the answer)
+  bool skip_verify = false;  ///< tests only (hidden): send a blob that fails Verify
+};
+int RunUpload(const UploadArgs& args);
+struct StatusArgs {
+  std::string to;
+  std::string key_file;
+  bool json = false;
+  int timeout_ms = 2000;
+};
+int RunStatus(const StatusArgs& args);
 
 }  // namespace palpa::cli

@@ -52,7 +52,9 @@ constexpr int kExitFailed = 1;              // a replay did not match or broke a
 constexpr double kForceScale = 16777216.0;  // goldens store forces in units of 2^-24 N
 // palpa/servo/servo_loop.h TelemetryFlag: clamped 1, e-stop 2, ramp 4, overrun 8, GPIO error 16.
 constexpr std::uint32_t kTelemetryFlagEstop = 1u << 1;
-constexpr std::uint32_t kGoldenFlags = 1u | 2u | 4u | 16u;  // all but overrun (wall-clock, paced only)
+// swap 32, swap ramp 64 (issue 7).
+constexpr std::uint32_t kTelemetryFlagSwap = 1u << 5;
+constexpr std::uint32_t kGoldenFlags = 1u | 2u | 4u | 16u | 32u | 64u;  // all but overrun (wall-clock, paced only)
 
 // ---------------------------------------------------------------- small helpers
 
@@ -165,6 +167,9 @@ struct Case {
   double sphere_radius_m = 0;
   std::optional<double> validate_rms_pct, validate_angle_deg;
   bool realtime = true;  // also replayed by --realtime
+  // A field swap mid-replay (palpad --swap-at): tick swap_at runs on swap_field.
+  std::string swap_field;
+  std::int64_t swap_at = -1;
   // Known failures (substrings of failure sentences), each with its reason in cases.toml: reported
   // as "known", not counted; one that no longer occurs is reported so that it gets removed.
   std::vector<std::string> xfail;
@@ -228,6 +233,8 @@ std::expected<Suite, std::string> LoadSuite(const fs::path& cases_path) {
     c.why = (*ct)["why"].value_or(std::string());
     c.expect_exit = (*ct)["expect_exit"].value_or(0);
     c.realtime = (*ct)["realtime"].value_or(true);
+    c.swap_field = (*ct)["swap_field"].value_or(std::string());
+    c.swap_at = (*ct)["swap_at"].value_or(std::int64_t{-1});
     if (c.name.empty() || c.trace.empty() || c.field.empty())
       return std::unexpected(where(node) + ": a case needs name, trace and field");
     // Errors about a key name the key's own line.
@@ -236,6 +243,10 @@ std::expected<Suite, std::string> LoadSuite(const fs::path& cases_path) {
       return where(n != nullptr ? *n : node);
     };
     if (!s.fields.contains(c.field)) return std::unexpected(at("field") + ": unknown field '" + c.field + "'");
+    if (!c.swap_field.empty() && !s.fields.contains(c.swap_field))
+      return std::unexpected(at("swap_field") + ": unknown field '" + c.swap_field + "'");
+    if (c.swap_field.empty() != (c.swap_at < 0))
+      return std::unexpected(where(node) + ": swap_field and swap_at (a tick ≥ 0) go together");
     if (c.device != "sim" && c.device != "virtual-falcon")
       return std::unexpected(at("device") + ": device must be sim or virtual-falcon");
     if (c.why.empty()) return std::unexpected(where(node) + ": case " + c.name + " must say why (its device choice)");
@@ -476,11 +487,11 @@ struct Metrics {
   std::vector<std::string> failures;  // invariant and validation failures, one sentence each
 };
 
-Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSampler& field, double k, double max_force,
-                const Limits& lim) {
+// `swap_field`: the field from tick c.swap_at on (a swap case), else nullptr.
+Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSampler& first_field,
+                const FieldSampler* swap_field, double k, double max_force, const Limits& lim) {
   Metrics m;
   m.ticks = ticks.size();
-  const double voxel = field.voxel_m();
   for (std::size_t i = 1; i < ticks.size(); ++i) {
     const Eigen::Vector3d d(ticks[i].hip[0] - ticks[i - 1].hip[0], ticks[i].hip[1] - ticks[i - 1].hip[1],
                             ticks[i].hip[2] - ticks[i - 1].hip[2]);
@@ -499,10 +510,14 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
     const Eigen::Vector3d proxy(t.proxy[0], t.proxy[1], t.proxy[2]);
     m.contact_ticks += t.contact ? 1 : 0;
     m.max_force_n = std::max(m.max_force_n, f.norm());
+    const bool swapped = swap_field != nullptr && c.swap_at >= 0 && i >= static_cast<std::size_t>(c.swap_at);
+    const FieldSampler& field_at = swapped ? *swap_field : first_field;
     if ((t.flags & kTelemetryFlagEstop) != 0) seated = false;
+    // A swap whose HIP is beyond the new field's band restarts the proxy at the HIP (docs/upload.md).
+    if ((t.flags & kTelemetryFlagSwap) != 0 && t.proxy == t.hip) seated = false;
     if (!seated)
-      seated = (t.flags & kTelemetryFlagEstop) == 0 && field.Phi(Eigen::Vector3d(t.hip[0], t.hip[1], t.hip[2])) >= 0;
-    const double phi_voxels = seated ? field.Phi(proxy) / voxel : m.min_proxy_phi_voxels;
+      seated = (t.flags & kTelemetryFlagEstop) == 0 && field_at.Phi(Eigen::Vector3d(t.hip[0], t.hip[1], t.hip[2])) >= 0;
+    const double phi_voxels = seated ? field_at.Phi(proxy) / field_at.voxel_m() : m.min_proxy_phi_voxels;
     if (phi_voxels < m.min_proxy_phi_voxels) {
       m.min_proxy_phi_voxels = phi_voxels;
       worst_phi_tick = i;
@@ -916,33 +931,56 @@ int RunCases(Context& cx, const std::string& action) {
       fmt::print(stderr, "palpa hil: case {}: {}\n", c.name, tr.error().message);
       return kExitBadInput;
     }
-    auto replay = RunReplay(cx, c, *field, fast);
+    // A swap case replays with --swap-at TICK:PATH; the goldens keep the case's own arguments
+    // (the path depends on the work directory).
+    Case with_swap = c;
+    if (!c.swap_field.empty()) {
+      auto swap = EnsureField(cx, c.swap_field);
+      if (!swap) {
+        fmt::print(stderr, "palpa hil: {}\n", swap.error());
+        return kExitBadInput;
+      }
+      with_swap.palpad.insert(with_swap.palpad.end(), {"--swap-at", fmt::format("{}:{}", c.swap_at, swap->string())});
+    }
+    auto replay = RunReplay(cx, with_swap, *field, fast);
     if (!replay) {
       fmt::print(stderr, "palpa hil: case {}: {}\n", c.name, replay.error());
       return kExitBadInput;
     }
     // Each field is read and verified once per run (the sphere's is 108 MB).
-    auto& loaded = loaded_fields[c.field];
-    if (!loaded) {
-      auto blob_bytes = blob::ReadFile(field->c_str());
+    const auto load = [&](const std::string& name, const fs::path& path) -> const LoadedField* {
+      auto& loaded = loaded_fields[name];
+      if (loaded) return loaded.get();
+      auto blob_bytes = blob::ReadFile(path.c_str());
       if (!blob_bytes) {
         fmt::print(stderr, "palpa hil: {}\n", blob_bytes.error().what());
-        return kExitBadInput;
+        return nullptr;
       }
       loaded = std::make_unique<LoadedField>(std::move(*blob_bytes));
       auto view = blob::Verify(loaded->bytes);
       if (!view) {
-        fmt::print(stderr, "palpa hil: {}: {}\n", field->string(), view.error().what());
-        return kExitBadInput;
+        fmt::print(stderr, "palpa hil: {}: {}\n", path.string(), view.error().what());
+        loaded.reset();
+        return nullptr;
       }
       loaded->view = *view;
-    }
+      return loaded.get();
+    };
+    const LoadedField* loaded = load(c.field, *field);
+    if (loaded == nullptr) return kExitBadInput;
     const FieldSampler sampler(loaded->view);
+    std::optional<FieldSampler> swap_sampler;
+    if (!c.swap_field.empty()) {
+      const LoadedField* swap_loaded = load(c.swap_field, cx.work / "fields" / (c.swap_field + ".palpa"));
+      if (swap_loaded == nullptr) return kExitBadInput;
+      swap_sampler.emplace(swap_loaded->view);
+    }
     // Timing and telemetry flags from palpad --record-timing (both modes).
     const auto timing = ReadTiming(replay->dir / "timing.csv");
     for (std::size_t i = 0; i < timing.size() && i < replay->ticks.size(); ++i)
       replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & kGoldenFlags);
-    Metrics m = Measure(replay->ticks, c, sampler, cx.k, cx.max_force, cx.suite.limits);
+    Metrics m = Measure(replay->ticks, c, sampler, swap_sampler ? &*swap_sampler : nullptr, cx.k, cx.max_force,
+                        cx.suite.limits);
     if (replay->exit_code != c.expect_exit)
       m.failures.push_back(fmt::format("palpad exited {} (expected {}): {}", replay->exit_code, c.expect_exit,
                                        Replace(replay->stderr_text.substr(0, 400), "\n", " | ")));
@@ -964,6 +1002,16 @@ int RunCases(Context& cx, const std::string& action) {
           fmt::format("e-stop asserted on {} ticks, {} of them with non-zero force", estop_ticks, estop_force_ticks));
     if (estop_ticks == 0 && std::ranges::find(c.palpad, "--estop") != c.palpad.end())
       m.failures.push_back("the case wires an e-stop but no tick saw it asserted");
+    if (!c.swap_field.empty()) {
+      const auto swapped =
+          std::ranges::find_if(timing, [](const auto& t) { return (t.flags & kTelemetryFlagSwap) != 0; });
+      if (swapped == timing.end())
+        m.failures.push_back(
+            fmt::format("the case swaps to field {} at tick {}, but no tick took it", c.swap_field, c.swap_at));
+      else if (swapped - timing.begin() != c.swap_at)
+        m.failures.push_back(
+            fmt::format("the field swap landed on tick {}, not tick {}", swapped - timing.begin(), c.swap_at));
+    }
     const Percentiles pw = Figures(wake), pc = Figures(compute), pt = Figures(total);
     all_wake.insert(all_wake.end(), wake.begin(), wake.end());
     all_compute.insert(all_compute.end(), compute.begin(), compute.end());

@@ -1,8 +1,10 @@
+#include <algorithm>
 #include <cstring>
 #include <string>
 #include <vector>
 
 #include <fmt/core.h>
+#include <zstd.h>
 
 #include "atomic_file.h"
 #include "commands.h"
@@ -11,21 +13,11 @@
 namespace palpa::cli {
 namespace {
 
-const char* MethodName(blob::Method m) {
-  switch (m) {
-    case blob::Method::kErosion:
-      return "erosion";
-    case blob::Method::kEdt:
-      return "edt";
-    case blob::Method::kHermite:
-      return "hermite";
-  }
-  return "unknown";
-}
+using blob::MethodName;
 
 // Reads and verifies; prints the refusal naming the file, field and byte.
 std::optional<std::pair<std::vector<std::byte>, blob::FieldView>> Load(const std::string& path, const char* cmd) {
-  auto bytes = blob::ReadFile(path.c_str());
+  auto bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // v2 as stored: its own figures
   if (!bytes) {
     fmt::print(stderr, "palpa {}: {}\n", cmd, bytes.error().what());
     return std::nullopt;
@@ -46,22 +38,51 @@ int RunInfo(const std::string& path, bool json) {
   if (!loaded) return kExitBadInput;
   const blob::FieldView& v = loaded->second;
   const std::size_t size = loaded->first.size();
+  // Size figures (issue 7): stored voxels (v2: octants × 64, padding included), the blob's bytes
+  // per stored voxel and against a dense float32 grid, and what zstd (level 3, as an upload would
+  // send it) makes of it.
+  const double nodes = static_cast<double>(v.dims[0]) * v.dims[1] * v.dims[2];
+  const double stored = v.version == blob::kVersion2 ? static_cast<double>(v.octant_count) * blob::kOctantNodes : nodes;
+  const double per_voxel = stored > 0 ? static_cast<double>(size) / stored : 0.0;
+  const double pct_dense = 100.0 * static_cast<double>(size) / (4.0 * nodes);
+  std::vector<char> packed(ZSTD_compressBound(size));
+  const std::size_t zsize = ZSTD_compress(packed.data(), packed.size(), loaded->first.data(), size, 3);
+  const std::size_t zstd_bytes = ZSTD_isError(zsize) != 0 ? 0 : zsize;
   if (json) {
     fmt::print(
-        "{{\"file\": \"{}\", \"format_version\": 1, \"dims\": [{}, {}, {}], \"origin\": [{:.17g}, {:.17g}, {:.17g}], "
+        "{{\"file\": \"{}\", \"format_version\": {}, \"band_outside\": {}, \"brick_count\": {}, \"octant_count\": {}, "
+        "\"stored_voxels\": {}, \"bytes_per_stored_voxel\": {:.4f}, \"percent_of_dense_float32\": {:.3f}, "
+        "\"zstd_bytes\": {}, ",
+        path, v.version, v.band_outside, v.brick_count, v.octant_count, static_cast<std::uint64_t>(stored), per_voxel,
+        pct_dense, zstd_bytes);
+    fmt::print(
+        "\"dims\": [{}, {}, {}], \"origin\": [{:.17g}, {:.17g}, {:.17g}], "
         "\"voxel\": {:.17g}, \"band_voxels\": {}, \"method\": \"{}\", \"point_count\": {}, \"build_time_s\": {:.9g}, "
         "\"fit_scale\": {:.17g}, \"fit_offset\": [{:.17g}, {:.17g}, {:.17g}], \"blob_bytes\": {}, "
         "\"crc32c\": \"0x{:08x}\", \"checksum\": \"ok\"}}\n",
-        path, v.dims[0], v.dims[1], v.dims[2], v.origin_m[0], v.origin_m[1], v.origin_m[2], v.voxel_m, v.band_voxels,
+        v.dims[0], v.dims[1], v.dims[2], v.origin_m[0], v.origin_m[1], v.origin_m[2], v.voxel_m, v.band_voxels,
         MethodName(v.method), v.point_count, static_cast<double>(v.build_time_ns) * 1e-9, v.fit_scale,
         v.fit_offset_m[0], v.fit_offset_m[1], v.fit_offset_m[2], size, v.crc32c);
     return kExitOk;
   }
-  fmt::print("{}: palpa field blob v1, {} bytes\n", path, size);
+  fmt::print("{}: palpa field blob v{}, {} bytes\n", path, v.version, size);
+  fmt::print(
+      "  size        {} stored voxels, {:.3f} bytes per stored voxel, {:.2f} % of dense float32, zstd {} bytes\n",
+      static_cast<std::uint64_t>(stored), per_voxel, pct_dense, zstd_bytes);
+  if (v.version == blob::kVersion2)
+    fmt::print("  bricks      {} of {} slots (8³), {} octants (4³, int16 voxel/256)\n", v.brick_count,
+               static_cast<std::uint64_t>(v.brick_dims[0]) * static_cast<std::uint64_t>(v.brick_dims[1]) *
+                   static_cast<std::uint64_t>(v.brick_dims[2]),
+               v.octant_count);
   fmt::print("  dims        {} x {} x {} nodes\n", v.dims[0], v.dims[1], v.dims[2]);
   fmt::print("  origin      ({:.6f}, {:.6f}, {:.6f}) m\n", v.origin_m[0], v.origin_m[1], v.origin_m[2]);
   fmt::print("  voxel       {:.6f} mm\n", v.voxel_m * 1e3);
-  fmt::print("  band        {} voxels ({:.3f} mm)\n", v.band_voxels, v.band_voxels * v.voxel_m * 1e3);
+  if (v.version == blob::kVersion2) {
+    fmt::print("  band        {} voxels inside, {} outside ({:.3f} / {:.3f} mm)\n", v.band_voxels, v.band_outside,
+               v.band_voxels * v.voxel_m * 1e3, v.band_outside * v.voxel_m * 1e3);
+  } else {
+    fmt::print("  band        {} voxels ({:.3f} mm)\n", v.band_voxels, v.band_voxels * v.voxel_m * 1e3);
+  }
   fmt::print("  method      {}\n", MethodName(v.method));
   fmt::print("  points      {}\n", v.point_count);
   fmt::print("  build time  {:.3f} s\n", static_cast<double>(v.build_time_ns) * 1e-9);
@@ -91,8 +112,13 @@ int RunExport(const std::string& path, const std::string& npy) {
   std::memcpy(out.data() + 8, &hlen, 2);
   std::memcpy(out.data() + 10, header.data(), header.size());
   std::byte* data = out.data() + 10 + header.size();
+  // Either version as the dense v1 grid the host tools see (docs/blob-format.md § Tools and v2):
+  // v2 values clamped to ±max(band_inside, band_outside), so free-space bounds read as the band.
+  std::vector<std::int32_t> q16 = blob::DenseQ16(v);
+  const std::int32_t band = std::max(v.band_voxels, v.band_outside) << 16;
+  for (std::int32_t& x : q16) x = std::clamp(x, -band, band);
   for (std::size_t n = 0; n < count; ++n) {
-    const float metres = static_cast<float>(static_cast<double>(v.phi[n]) / 65536.0 * v.voxel_m);
+    const float metres = static_cast<float>(static_cast<double>(q16[n]) / 65536.0 * v.voxel_m);
     std::memcpy(data + 4 * n, &metres, 4);
   }
   if (auto w = WriteFileAtomically(npy, out); !w) {

@@ -33,9 +33,15 @@ int main(int argc, char** argv) {
   auto* voxel = build->add_option("--voxel", b.voxel_m, "Node spacing in metres (instead of --cells)")
                     ->check(CLI::PositiveNumber);
   cells->excludes(voxel);
-  build->add_option("--band", b.band_voxels, "Narrow band half-width in voxels (paper: 5-6)")
+  build->add_option("--band", b.band_voxels, "Narrow band half-width in voxels (paper: 5-6); v2: inside the object")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
+  build->add_option("--band-outside", b.band_outside, "v2: band outside the object in voxels (docs/blob-format.md)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  build->add_option("--format", b.format, "Blob version: 2 (narrow-band bricks) or 1 (dense, for older palpad)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 2));
   b.method = "hermite";  // the default (docs/field-methods.md)
   build
       ->add_option("--method", b.method,
@@ -164,6 +170,8 @@ int main(int argc, char** argv) {
   bench_latency->add_option("--palpad", bench_args.palpad,
                             "palpad binary (default: next to palpa or the build tree's)");
   bench_latency->add_flag("--no-cyclictest", bench_no_cyclictest, "Skip the cyclictest anchor");
+  bench_latency->add_flag("--with-viewer", bench_args.with_viewer,
+                          "Also run palpad with palpa view --connect polling its status channel; both rows");
   bench_latency->add_option("--rounds", bench_args.rounds, "Alternate palpad and cyclictest in this many segments")
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
@@ -220,6 +228,35 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 64));
   slice->add_flag("-q,--quiet", sl.quiet, "No report on stdout");
 
+  ViewArgs va;
+  auto* view_cmd = app.add_subcommand("view", "Serve the browser view: iso-surface, replay, live (docs/view.md)");
+  view_cmd->add_option("field", va.field, "FIELD.palpa")->required();
+  view_cmd->add_option("--trace", va.trace, "Replay: palpad output CSV or a HIL result directory");
+  auto* view_connect = view_cmd->add_option("--connect", va.connect, "Live: palpad --listen HOST:PORT");
+  view_cmd->add_option("--key-file", va.key_file, "Live: the status channel key (palpa keygen)")->needs(view_connect);
+  view_cmd->add_option("--bind", va.bind, "HOST:PORT to serve on (loopback unless asked; port 0: any free)")
+      ->capture_default_str();
+  view_cmd->add_option("--assets", va.assets, "The page's asset directory (default: installed or build tree)");
+
+  std::string keygen_out;
+  bool keygen_force = false;
+  auto* keygen = app.add_subcommand("keygen", "Write a new 32-byte shared key for palpad --listen (mode 0600)");
+  keygen->add_option("-o,--output", keygen_out, "Key file to create")->required();
+  keygen->add_flag("--force", keygen_force, "Replace an existing key file");
+  UploadArgs up;
+  auto* upload = app.add_subcommand("upload", "Verify a field blob and send it to a running palpad (docs/upload.md)");
+  upload->add_option("field", up.field, "FIELD.palpa")->required();
+  upload->add_option("--to", up.to, "HOST:PORT of palpad --listen")->required();
+  upload->add_option("--key-file", up.key_file, "Shared key (palpa keygen), mode 0600")->required();
+  upload->add_option("--timeout-ms", up.timeout_ms, "Longest wait for the controller, ms")
+      ->check(CLI::Range(10, 600000));
+  upload->add_flag("--no-verify", up.skip_verify, "Send without verifying locally (testing the controller)")->group("");
+  StatusArgs st;
+  auto* status = app.add_subcommand("status", "A running palpad's field, counters and latest sample");
+  status->add_option("--to", st.to, "HOST:PORT of palpad --listen")->required();
+  status->add_option("--key-file", st.key_file, "Shared key (palpa keygen), mode 0600")->required();
+  status->add_flag("--json", st.json, "One JSON object");
+  status->add_option("--timeout-ms", st.timeout_ms, "Longest wait, ms")->check(CLI::Range(10, 600000));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -237,6 +274,9 @@ int main(int argc, char** argv) {
     if (voxel->count() > 0) b.cells = 0;
     return RunBuild(b);
   }
+  if (*keygen) return RunKeygen(keygen_out, keygen_force);
+  if (*upload) return RunUpload(up);
+  if (*status) return RunStatus(st);
   if (*info) return RunInfo(info_field, info_json);
   if (*exp) return RunExport(export_field, export_npy);
   if (*synth) return RunTraceSynth(t);
@@ -257,6 +297,7 @@ int main(int argc, char** argv) {
   if (*sample) return RunSample(sa);
   if (*eval) return RunEval(ea);
   if (*mesh_cmd) return RunMesh(ma);
+  if (*view_cmd) return RunView(va);
   if (*slice) {
     sl.axis = slice_axis[0];
     return RunSlice(sl);

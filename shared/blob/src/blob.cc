@@ -1,9 +1,11 @@
 #include "palpa/blob/blob.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 
 namespace palpa::blob {
 namespace {
@@ -40,6 +42,8 @@ bool Finite3(const std::array<double, 3>& v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
 }
 
+std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob);
+
 }  // namespace
 
 std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc) {
@@ -55,9 +59,10 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
     return Fail("magic", 0, "not a palpa field blob (expected \"PALPASDF\")");
   std::uint16_t version = 0;
   std::memcpy(&version, blob.data() + offsetof(HeaderV1, version), sizeof version);
+  if (version == kVersion2) return VerifyV2(blob);
   if (version != kVersion)
     return Fail("version", offsetof(HeaderV1, version),
-                "%u is not supported (this build reads v1; rebuild the field with a matching palpa)",
+                "%u is not supported (this build reads v1 and v2; rebuild the field with a matching palpa)",
                 static_cast<unsigned>(version));
   std::uint16_t header_size = 0;
   std::memcpy(&header_size, blob.data() + offsetof(HeaderV1, header_size), sizeof header_size);
@@ -84,7 +89,8 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
     return Fail("voxel_m", offsetof(HeaderV1, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
   if (h.band_voxels < 1 || h.band_voxels > kMaxBandVoxels)
     return Fail("band_voxels", offsetof(HeaderV1, band_voxels), "%u, allowed 1..%u", h.band_voxels, kMaxBandVoxels);
-  if (h.method < static_cast<std::uint32_t>(Method::kErosion) || h.method > static_cast<std::uint32_t>(Method::kHermite))
+  if (h.method < static_cast<std::uint32_t>(Method::kErosion) ||
+      h.method > static_cast<std::uint32_t>(Method::kHermite))
     return Fail("method", offsetof(HeaderV1, method), "%u is unknown", h.method);
   if (h.reserved0 != 0) return Fail("reserved0", offsetof(HeaderV1, reserved0), "must be zero");
   if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))
@@ -102,8 +108,8 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
     return Fail("payload", size, "truncated: %zu of %llu payload bytes present", have,
                 static_cast<unsigned long long>(h.payload_size));
   if (have > h.payload_size)  // here payload_size < have, so it fits size_t
-    return Fail("payload", kHeaderSize + static_cast<std::size_t>(h.payload_size), "%llu trailing bytes after the payload",
-                static_cast<unsigned long long>(have - h.payload_size));
+    return Fail("payload", kHeaderSize + static_cast<std::size_t>(h.payload_size),
+                "%llu trailing bytes after the payload", static_cast<unsigned long long>(have - h.payload_size));
 
   std::uint32_t crc = Crc32c(blob.first(kCrcOffset));
   crc = Crc32c(blob.subspan(kHeaderSize), crc);
@@ -132,6 +138,9 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
   v.fit_scale = h.fit_scale;
   v.fit_offset_m = h.fit_offset_m;
   v.crc32c = h.crc32c;
+  v.band_outside = v.band_voxels;
+  v.version = kVersion;
+  v.blob_size = size;
   return v;
 }
 
@@ -161,7 +170,7 @@ std::vector<std::byte> Encode(const BlobMeta& meta, std::span<const std::int32_t
   return out;
 }
 
-std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path) {
+std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load) {
   std::FILE* f = std::fopen(path, "rb");
   if (f == nullptr) return Fail("file", 0, "cannot open %s: %s", path, std::strerror(errno));
   std::vector<std::byte> data;
@@ -172,7 +181,370 @@ std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path) {
   const bool failed = std::ferror(f) != 0;
   std::fclose(f);
   if (failed) return Fail("file", data.size(), "read error in %s", path);
-  return data;
+  std::uint16_t version = 0;
+  if (load == Load::kAsStored || data.size() < kHeaderSizeV2 ||
+      std::memcmp(data.data(), kMagic.data(), kMagic.size()) != 0)
+    return data;
+  std::memcpy(&version, data.data() + offsetof(HeaderV1, version), sizeof version);
+  if (version != kVersion2) return data;
+  const auto view = Verify(data);
+  if (!view) return std::unexpected(view.error());
+  // The dense v1 equivalent: the same node values, clamped to a symmetric band (v1's rule).
+  const std::int32_t band = std::max(view->band_voxels, view->band_outside);
+  std::vector<std::int32_t> phi = DenseQ16(*view);
+  for (std::int32_t& x : phi) x = std::clamp(x, -(band << 16), band << 16);
+  BlobMeta meta;
+  for (std::size_t a = 0; a < 3; ++a) meta.dims[a] = static_cast<std::uint32_t>(view->dims[a]);
+  meta.origin_m = view->origin_m;
+  meta.voxel_m = view->voxel_m;
+  meta.band_voxels = static_cast<std::uint32_t>(band);
+  meta.method = view->method;
+  meta.point_count = view->point_count;
+  meta.build_time_ns = view->build_time_ns;
+  meta.fit_scale = view->fit_scale;
+  meta.fit_offset_m = view->fit_offset_m;
+  return Encode(meta, phi);
+}
+
+}  // namespace palpa::blob
+
+// ---- v2 ----
+
+namespace palpa::blob {
+namespace {
+
+constexpr std::uint64_t AlignUp(std::uint64_t x, std::uint64_t a) { return (x + a - 1) / a * a; }
+
+std::int32_t EntryPhi(std::uint32_t e) { return static_cast<std::int16_t>(e & 0xFFFFU); }
+
+std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob) {
+  const std::size_t size = blob.size();
+  std::uint16_t header_size = 0;
+  std::memcpy(&header_size, blob.data() + offsetof(HeaderV2, header_size), sizeof header_size);
+  if (header_size != kHeaderSizeV2)
+    return Fail("header_size", offsetof(HeaderV2, header_size), "%u, expected %u", static_cast<unsigned>(header_size),
+                static_cast<unsigned>(kHeaderSizeV2));
+  if (size < kHeaderSizeV2) return Fail("header", size, "truncated: blob is %zu bytes, header needs %u", size, 168U);
+  if (reinterpret_cast<std::uintptr_t>(blob.data()) % alignof(std::uint32_t) != 0)
+    return Fail("payload", kHeaderSizeV2, "buffer is not 4-byte aligned; cannot read in place");
+
+  HeaderV2 h;
+  std::memcpy(&h, blob.data(), sizeof h);
+  if (h.flags != 0) return Fail("flags", offsetof(HeaderV2, flags), "0x%08x has unknown bits set", h.flags);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (h.dims[a] < 2 || h.dims[a] > kMaxDim)
+      return Fail("dims", offsetof(HeaderV2, dims) + 4 * a, "axis %zu has %u nodes, allowed 2..%u", a, h.dims[a],
+                  kMaxDim);
+  }
+  if (h.value_format != kValueFormatQ7_8Voxels)
+    return Fail("value_format", offsetof(HeaderV2, value_format), "%u is unknown (2 = int16 Q7.8 voxels)",
+                h.value_format);
+  if (!Finite3(h.origin_m)) return Fail("origin_m", offsetof(HeaderV2, origin_m), "not finite");
+  if (!(std::isfinite(h.voxel_m) && h.voxel_m > 0 && h.voxel_m < 1))
+    return Fail("voxel_m", offsetof(HeaderV2, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
+  if (h.band_inside < 1 || h.band_inside > kMaxBandVoxels)
+    return Fail("band_inside", offsetof(HeaderV2, band_inside), "%u, allowed 1..%u", h.band_inside, kMaxBandVoxels);
+  if (h.band_outside < 1 || h.band_outside > kMaxBandVoxels)
+    return Fail("band_outside", offsetof(HeaderV2, band_outside), "%u, allowed 1..%u", h.band_outside, kMaxBandVoxels);
+  if (h.method < static_cast<std::uint32_t>(Method::kErosion) ||
+      h.method > static_cast<std::uint32_t>(Method::kHermite))
+    return Fail("method", offsetof(HeaderV2, method), "%u is unknown", h.method);
+  if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))
+    return Fail("fit_scale", offsetof(HeaderV2, fit_scale), "%g must be finite and > 0", h.fit_scale);
+  if (!Finite3(h.fit_offset_m)) return Fail("fit_offset_m", offsetof(HeaderV2, fit_offset_m), "not finite");
+  // dims ≤ 2^12, so brick_dims ≤ 2^9 and slots ≤ 2^27; the counts are checked against slots
+  // before use, so every size below is < 2^40 and no sum can overflow 64 bits.
+  std::uint64_t slots = 1;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const std::uint32_t want = (h.dims[a] + kBrick - 1) / kBrick;
+    if (h.brick_dims[a] != want)
+      return Fail("brick_dims", offsetof(HeaderV2, brick_dims) + 4 * a, "axis %zu has %u bricks, expected ⌈%u/8⌉ = %u",
+                  a, h.brick_dims[a], h.dims[a], want);
+    slots *= want;
+  }
+  if (h.brick_count > slots)
+    return Fail("brick_count", offsetof(HeaderV2, brick_count), "%u bricks for %llu slots", h.brick_count,
+                static_cast<unsigned long long>(slots));
+  if (h.octant_count > 8ULL * h.brick_count)
+    return Fail("octant_count", offsetof(HeaderV2, octant_count), "%u octants for %u bricks", h.octant_count,
+                h.brick_count);
+  if (h.reserved0 != 0) return Fail("reserved0", offsetof(HeaderV2, reserved0), "must be zero");
+  const std::uint64_t tables = kHeaderSizeV2 + 4 * slots;
+  const std::uint64_t tables_end = tables + kTableBytes * h.brick_count;
+  const std::uint64_t octants_offset = AlignUp(tables_end, kOctantAlign);
+  if (h.octants_offset != octants_offset)
+    return Fail("octants_offset", offsetof(HeaderV2, octants_offset),
+                "%llu, expected align64(168 + 4·%llu + 32·%u) = %llu",
+                static_cast<unsigned long long>(h.octants_offset), static_cast<unsigned long long>(slots),
+                h.brick_count, static_cast<unsigned long long>(octants_offset));
+  const std::uint64_t payload = octants_offset - kHeaderSizeV2 + std::uint64_t{h.octant_count} * kOctantBytes;
+  if (h.payload_size != payload)
+    return Fail("payload_size", offsetof(HeaderV2, payload_size), "%llu, expected %llu",
+                static_cast<unsigned long long>(h.payload_size), static_cast<unsigned long long>(payload));
+  if (h.reserved1 != 0) return Fail("reserved1", offsetof(HeaderV2, reserved1), "must be zero");
+  const std::size_t have = size - kHeaderSizeV2;
+  if (have < payload)
+    return Fail("payload", size, "truncated: %zu of %llu payload bytes present", have,
+                static_cast<unsigned long long>(payload));
+  if (have > payload)
+    return Fail("payload", kHeaderSizeV2 + static_cast<std::size_t>(payload), "%llu trailing bytes after the payload",
+                static_cast<unsigned long long>(have - payload));
+
+  std::uint32_t crc = Crc32c(blob.first(kCrcOffsetV2));
+  crc = Crc32c(blob.subspan(kHeaderSizeV2), crc);
+  if (crc != h.crc32c)
+    return Fail("crc32c", kCrcOffsetV2, "stored 0x%08x, computed 0x%08x: the blob is corrupt", h.crc32c, crc);
+
+  // Every offset is now inside the buffer, hence fits size_t.
+  for (auto b = static_cast<std::size_t>(tables_end); b < static_cast<std::size_t>(octants_offset); ++b) {
+    if (blob[b] != std::byte{0}) return Fail("padding", b, "must be zero");
+  }
+  const auto* index = reinterpret_cast<const std::uint32_t*>(blob.data() + kHeaderSizeV2);
+  const auto* table = reinterpret_cast<const std::uint32_t*>(blob.data() + static_cast<std::size_t>(tables));
+  const auto* octants = reinterpret_cast<const std::int16_t*>(blob.data() + static_cast<std::size_t>(octants_offset));
+  const std::int32_t lo = -static_cast<std::int32_t>(h.band_inside) * 256;
+  const std::int32_t hi = static_cast<std::int32_t>(h.band_outside) * 256;
+  // A uniform entry: flag, zero bits 16..30, φ ≥ −band_inside (above +band_outside only as a
+  // free-space bound).
+  const auto uniform_ok = [&](std::uint32_t e) { return (e & 0x7FFF0000U) == 0 && EntryPhi(e) >= lo; };
+  std::uint32_t next_brick = 0, next_octant = 0;  // both stored in order of first use, once each
+  std::size_t slot = 0;
+  for (std::uint32_t bi = 0; bi < h.brick_dims[0]; ++bi) {
+    for (std::uint32_t bj = 0; bj < h.brick_dims[1]; ++bj) {
+      for (std::uint32_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
+        const std::uint32_t e = index[slot];
+        const std::size_t at = kHeaderSizeV2 + 4 * slot;
+        if ((e & kSlotEmpty) != 0) {
+          if (!uniform_ok(e)) return Fail("index", at, "uniform slot 0x%08x: bits 16..30 set or φ < −band_inside", e);
+          continue;
+        }
+        if (e != next_brick)
+          return Fail("index", at, "brick %u, expected %u (bricks are stored in slot order, once each)", e, next_brick);
+        if (next_brick >= h.brick_count) return Fail("index", at, "brick %u is past brick_count %u", e, h.brick_count);
+        for (std::uint32_t o = 0; o < 8; ++o) {
+          const std::size_t t_at = static_cast<std::size_t>(tables) + kTableBytes * next_brick + 4 * o;
+          const std::uint32_t t = table[8 * static_cast<std::size_t>(next_brick) + o];
+          if ((t & kSlotEmpty) != 0) {
+            if (!uniform_ok(t))
+              return Fail("tables", t_at, "uniform octant 0x%08x: bits 16..30 set or φ < −band_inside", t);
+            continue;
+          }
+          if (t != next_octant)
+            return Fail("tables", t_at, "octant %u, expected %u (octants are stored in order, once each)", t,
+                        next_octant);
+          if (next_octant >= h.octant_count)
+            return Fail("tables", t_at, "octant %u is past octant_count %u", t, h.octant_count);
+          const std::int16_t* v = octants + static_cast<std::size_t>(next_octant) * kOctantNodes;
+          const std::uint32_t i0 = bi * kBrick + (o >> 2) * kOctant, j0 = bj * kBrick + ((o >> 1) & 1) * kOctant,
+                              k0 = bk * kBrick + (o & 1) * kOctant;
+          for (std::uint32_t n = 0; n < kOctantNodes; ++n) {
+            const std::size_t byte = static_cast<std::size_t>(octants_offset) + next_octant * kOctantBytes + 2 * n;
+            const bool in_grid =
+                i0 + (n >> 4) < h.dims[0] && j0 + ((n >> 2) & 3) < h.dims[1] && k0 + (n & 3) < h.dims[2];
+            if (!in_grid) {
+              if (v[n] != 0) return Fail("padding", byte, "node outside the grid must be zero");
+            } else if (v[n] < lo || v[n] > hi) {
+              return Fail("octants", byte, "φ = %.4f voxels is outside [−%u, %u]", static_cast<double>(v[n]) / 256.0,
+                          h.band_inside, h.band_outside);
+            }
+          }
+          ++next_octant;
+        }
+        ++next_brick;
+      }
+    }
+  }
+  if (next_brick != h.brick_count)
+    return Fail("brick_count", offsetof(HeaderV2, brick_count), "%u, but the index references %u bricks", h.brick_count,
+                next_brick);
+  if (next_octant != h.octant_count)
+    return Fail("octant_count", offsetof(HeaderV2, octant_count), "%u, but the tables reference %u octants",
+                h.octant_count, next_octant);
+
+  FieldView v;
+  v.brick_index = index;
+  v.brick_tables = table;
+  v.octants = octants;
+  for (std::size_t a = 0; a < 3; ++a) {
+    v.dims[a] = static_cast<std::int32_t>(h.dims[a]);
+    v.brick_dims[a] = static_cast<std::int32_t>(h.brick_dims[a]);
+  }
+  v.brick_count = h.brick_count;
+  v.octant_count = h.octant_count;
+  v.origin_m = h.origin_m;
+  v.voxel_m = h.voxel_m;
+  v.band_voxels = static_cast<std::int32_t>(h.band_inside);
+  v.band_outside = static_cast<std::int32_t>(h.band_outside);
+  v.method = static_cast<Method>(h.method);
+  v.point_count = h.point_count;
+  v.build_time_ns = h.build_time_ns;
+  v.fit_scale = h.fit_scale;
+  v.fit_offset_m = h.fit_offset_m;
+  v.crc32c = h.crc32c;
+  v.version = kVersion2;
+  v.blob_size = size;
+  return v;
+}
+
+// Squared lower bound, voxels², of the distance between the cells touching two bricks |d| slots
+// apart along one axis: their node ranges [8b − 1, 8b + 8] are 8|d| − 9 apart.
+constexpr std::int64_t AxisGap2(std::int64_t d) {
+  const std::int64_t g = std::max<std::int64_t>(0, kBrick * (d < 0 ? -d : d) - (kBrick + 1));
+  return g * g;
+}
+
+// Free-space bounds (docs/blob-format.md): for every slot, the squared distance in voxels from the
+// cells touching it to the cells touching any "near" slot (not free space), by three separable
+// min-plus passes with the per-axis gap above. Window: beyond 17 slots on any axis the gap is
+// ≥ 135 voxels, above any Q7.8 value, so the cap stands.
+std::vector<std::int64_t> FreeSpaceDistance2(const std::array<std::uint32_t, 3>& bd, const std::vector<bool>& near) {
+  constexpr std::int64_t kInf = std::numeric_limits<std::int64_t>::max() / 4;
+  constexpr int kWindow = 17;
+  const std::size_t n = near.size();
+  std::vector<std::int64_t> d(n), tmp;
+  for (std::size_t s = 0; s < n; ++s) d[s] = near[s] ? 0 : kInf;
+  const std::array<std::size_t, 3> stride = {std::size_t{bd[1]} * bd[2], bd[2], 1};
+  for (std::size_t axis = 0; axis < 3; ++axis) {
+    tmp = d;
+    const auto len = static_cast<std::int64_t>(bd[axis]);
+    for (std::size_t s = 0; s < n; ++s) {
+      const auto pos = static_cast<std::int64_t>((s / stride[axis]) % bd[axis]);
+      std::int64_t best = kInf;
+      for (std::int64_t off = -kWindow; off <= kWindow; ++off) {
+        const std::int64_t q = pos + off;
+        if (q < 0 || q >= len) continue;
+        const std::int64_t v =
+            tmp[static_cast<std::size_t>(static_cast<std::int64_t>(s) + off * static_cast<std::int64_t>(stride[axis]))];
+        if (v < kInf) best = std::min(best, v + AxisGap2(off));
+      }
+      d[s] = best;
+    }
+  }
+  return d;
+}
+
+std::uint32_t Uniform(std::int16_t phi) { return kSlotEmpty | static_cast<std::uint16_t>(phi); }
+
+}  // namespace
+
+std::vector<std::byte> EncodeV2(const BlobMetaV2& m, std::span<const std::int32_t> phi) {
+  HeaderV2 h{};
+  h.magic = kMagic;
+  h.version = kVersion2;
+  h.header_size = kHeaderSizeV2;
+  h.dims = m.meta.dims;
+  h.value_format = kValueFormatQ7_8Voxels;
+  h.origin_m = m.meta.origin_m;
+  h.voxel_m = m.meta.voxel_m;
+  h.band_inside = m.band_inside;
+  h.band_outside = m.band_outside;
+  h.method = static_cast<std::uint32_t>(m.meta.method);
+  h.point_count = m.meta.point_count;
+  h.build_time_ns = m.meta.build_time_ns;
+  h.fit_scale = m.meta.fit_scale;
+  h.fit_offset_m = m.meta.fit_offset_m;
+  std::uint64_t slots = 1;
+  for (std::size_t a = 0; a < 3; ++a) {
+    h.brick_dims[a] = (h.dims[a] + kBrick - 1) / kBrick;
+    slots *= h.brick_dims[a];
+  }
+  const auto n_slots = static_cast<std::size_t>(slots);
+  const std::int32_t lo = -static_cast<std::int32_t>(m.band_inside) << 16;
+  const std::int32_t hi = static_cast<std::int32_t>(m.band_outside) << 16;
+  const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
+  std::vector<std::uint32_t> index(n_slots), tables;
+  std::vector<std::int16_t> values;  // stored octants, in order
+  std::size_t slot = 0;
+  for (std::size_t bi = 0; bi < h.brick_dims[0]; ++bi) {
+    for (std::size_t bj = 0; bj < h.brick_dims[1]; ++bj) {
+      for (std::size_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
+        std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
+        std::array<bool, 8> oct_uniform{}, oct_any{};
+        std::array<std::int16_t, 8> oct_phi{};
+        for (std::size_t o = 0; o < 8; ++o) {
+          oct_uniform[o] = true;
+          for (std::size_t n = 0; n < kOctantNodes; ++n) {
+            const std::size_t i = bi * kBrick + (o >> 2) * kOctant + (n >> 4);
+            const std::size_t j = bj * kBrick + ((o >> 1) & 1) * kOctant + ((n >> 2) & 3);
+            const std::size_t k = bk * kBrick + (o & 1) * kOctant + (n & 3);
+            if (i >= dims[0] || j >= dims[1] || k >= dims[2]) continue;  // padding stays 0
+            const std::int32_t v = std::clamp(phi[(i * dims[1] + j) * dims[2] + k], lo, hi);
+            const auto q = static_cast<std::int16_t>((v + 128) >> 8);  // nearest, ties up
+            oct[o][n] = q;
+            if (!oct_any[o]) oct_phi[o] = q;
+            oct_uniform[o] = oct_uniform[o] && q == oct_phi[o];
+            oct_any[o] = true;
+          }
+        }
+        // The brick is uniform if every octant with grid nodes is, with one value.
+        bool uniform = true;
+        std::int16_t brick_phi = 0;
+        bool have = false;
+        for (std::size_t o = 0; o < 8; ++o) {
+          if (!oct_any[o]) continue;
+          uniform = uniform && oct_uniform[o] && (!have || oct_phi[o] == brick_phi);
+          if (!have) brick_phi = oct_phi[o];
+          have = true;
+        }
+        if (uniform) {
+          index[slot] = Uniform(brick_phi);
+          continue;
+        }
+        index[slot] = static_cast<std::uint32_t>(tables.size() / 8);
+        for (std::size_t o = 0; o < 8; ++o) {
+          if (oct_uniform[o]) {
+            tables.push_back(Uniform(oct_phi[o]));  // an octant without grid nodes: 0
+          } else {
+            tables.push_back(static_cast<std::uint32_t>(values.size() / kOctantNodes));
+            values.insert(values.end(), oct[o].begin(), oct[o].end());
+          }
+        }
+      }
+    }
+  }
+  if (m.free_space_bounds) {
+    const std::uint32_t outside = Uniform(static_cast<std::int16_t>(m.band_outside * 256));
+    std::vector<bool> near(n_slots);
+    for (std::size_t s = 0; s < n_slots; ++s) near[s] = index[s] != outside;
+    const std::vector<std::int64_t> d2 = FreeSpaceDistance2(h.brick_dims, near);
+    for (std::size_t s = 0; s < n_slots; ++s) {
+      if (near[s]) continue;
+      // floor(256·√d2) exactly: the double estimate, corrected by integer squares.
+      const std::int64_t t = 65536 * std::min<std::int64_t>(d2[s], std::int64_t{1} << 30);
+      auto r = static_cast<std::int64_t>(std::sqrt(static_cast<double>(t)));
+      while (r * r > t) --r;
+      while ((r + 1) * (r + 1) <= t) ++r;
+      index[s] =
+          Uniform(static_cast<std::int16_t>(std::min<std::int64_t>(32767, std::int64_t{m.band_outside} * 256 + r)));
+    }
+  }
+  h.brick_count = static_cast<std::uint32_t>(tables.size() / 8);
+  h.octant_count = static_cast<std::uint32_t>(values.size() / kOctantNodes);
+  const std::uint64_t tables_at = kHeaderSizeV2 + 4 * slots;
+  h.octants_offset = AlignUp(tables_at + kTableBytes * h.brick_count, kOctantAlign);
+  h.payload_size = h.octants_offset - kHeaderSizeV2 + std::uint64_t{h.octant_count} * kOctantBytes;
+  std::vector<std::byte> out(kHeaderSizeV2 + static_cast<std::size_t>(h.payload_size));  // zeroed padding
+  std::memcpy(out.data() + kHeaderSizeV2, index.data(), 4 * index.size());
+  if (!tables.empty()) std::memcpy(out.data() + static_cast<std::size_t>(tables_at), tables.data(), 4 * tables.size());
+  if (!values.empty())
+    std::memcpy(out.data() + static_cast<std::size_t>(h.octants_offset), values.data(), 2 * values.size());
+  std::memcpy(out.data(), &h, sizeof h);
+  const std::span<const std::byte> bytes(out);
+  std::uint32_t crc = Crc32c(bytes.first(kCrcOffsetV2));
+  crc = Crc32c(bytes.subspan(kHeaderSizeV2), crc);
+  std::memcpy(out.data() + kCrcOffsetV2, &crc, sizeof crc);
+  return out;
+}
+
+std::vector<std::int32_t> DenseQ16(const FieldView& view) {
+  const auto nx = static_cast<std::size_t>(view.dims[0]), ny = static_cast<std::size_t>(view.dims[1]),
+             nz = static_cast<std::size_t>(view.dims[2]);
+  std::vector<std::int32_t> out(nx * ny * nz);
+  std::size_t n = 0;
+  for (std::int32_t i = 0; i < view.dims[0]; ++i)
+    for (std::int32_t j = 0; j < view.dims[1]; ++j)
+      for (std::int32_t k = 0; k < view.dims[2]; ++k) out[n++] = view.NodeQ16(i, j, k);
+  return out;
 }
 
 }  // namespace palpa::blob

@@ -7,11 +7,15 @@ namespace palpa::sampler {
 
 TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
     : phi_(field.phi),
+      index_(field.brick_index),
+      tables_(field.brick_tables),
+      octants_(field.octants),
+      brick_dims_(field.brick_dims),
       dims_(field.dims),
       last_{static_cast<std::uint32_t>(field.dims[0] - 1) << 16, static_cast<std::uint32_t>(field.dims[1] - 1) << 16,
             static_cast<std::uint32_t>(field.dims[2] - 1) << 16},
       stride_i_(static_cast<std::ptrdiff_t>(field.dims[1]) * field.dims[2]),
-      background_(field.band_voxels << 16) {
+      background_((field.phi != nullptr ? field.band_voxels : field.band_outside) << 16) {
   // One pass over every cell through Fetch (the storage's only access path). Skipped: cells whose
   // corners are all equal (free space and deep inside, most of the grid: zero gradient) and cells
   // with every corner ≤ −1 voxel (φ ≤ −1 throughout; the bound is only needed on {φ > −1}, see
@@ -24,6 +28,10 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
         const Stencil v = Fetch(i, j, k);
         if (std::all_of(v.begin() + 1, v.end(), [&](std::int32_t x) { return x == v[0]; })) continue;
         if (*std::max_element(v.begin(), v.end()) <= -(1 << 16)) continue;
+        // v2 free space (docs/blob-format.md § Free-space bound): every corner at or above the
+        // outside band. There φ is a lower bound of band_outside + the distance to the cells
+        // scanned here, which is all the proxy's certificate needs once Λ ≥ 1 (below).
+        if (phi_ == nullptr && *std::min_element(v.begin(), v.end()) >= background_) continue;
         // ∂φ/∂x is bilinear in (y, z) and constant in x, and likewise for y and z, so |∇φ|² is
         // convex along every axis-parallel line and its maximum over the cell is at a corner,
         // where each partial derivative is the edge difference through that corner.
@@ -35,6 +43,22 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
           mz = std::max(mz, static_cast<std::int32_t>(std::llabs(gz)));
         }
       }
+    }
+  }
+  if (phi_ == nullptr) {
+    bool far_bounds = false;  // any empty slot above the outside band
+    const std::size_t slots = static_cast<std::size_t>(brick_dims_[0]) * static_cast<std::size_t>(brick_dims_[1]) *
+                              static_cast<std::size_t>(brick_dims_[2]);
+    for (std::size_t s = 0; s < slots; ++s) {
+      const std::uint32_t e = index_[s];
+      far_bounds = far_bounds || ((e & blob::kSlotEmpty) != 0 &&
+                                  std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256 > background_);
+    }
+    if (far_bounds) {
+      mx = std::max(mx, 1 << 16);
+      my = std::max(my, 1 << 16);
+      mz = std::max(mz, 1 << 16);
+      norm2 = std::max(norm2, std::int64_t{1} << 32);
     }
   }
   lipschitz_.axis = {mx, my, mz};
@@ -53,6 +77,7 @@ std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t 
 Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) const {
   Cell c;
   if (!Locate(x, y, z, c)) return Background();
+  if (phi_ == nullptr) return InterpolateSmooth(FetchBricks<4>(c.i, c.j, c.k), c.fx, c.fy, c.fz);
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
 

@@ -3,6 +3,7 @@
 // Non-RT.
 #pragma once
 
+#include <cstdint>
 #include <expected>
 #include <optional>
 #include <span>
@@ -53,11 +54,23 @@ struct Options {
   std::string tick_gpio;              ///< --tick-gpio CHIP:LINE (raw text; parsed into tick_line)
   bool check_config = false;          ///< --check-config: validate the options, print them, exit
 
+  // Upload (issue 7, docs/upload.md).
+  std::string listen;                    ///< --listen HOST:PORT (port 0: ephemeral, printed); empty: no listener
+  std::string key_file;                  ///< --key-file: the shared key (palpa keygen), mode 0600
+  double max_blob = 64.0 * 1024 * 1024;  ///< --max-blob: upload cap and buffer size, bytes
+  double swap_ramp_ms = 50;              ///< --swap-ramp-ms: force ramp after a field swap, ms
+  std::string swap_at;                   ///< --swap-at N:FIELD (raw; parsed into swap_at_tick, swap_at_field)
+  std::uint64_t swap_at_tick = 0;        ///< offer swap_at_field during tick N (replays; scripted_swap.h)
+  std::string swap_at_field;             ///< empty: no scripted swap
+  double net_timeout_ms = 2000;          ///< --net-timeout-ms: header deadline, body idle limit
+
   // Parsed from the above by ParseArgs.
   std::optional<gpio::LineSpec> estop_line;
   int estop_button = -1;  ///< --estop button:N: the device's grip button N (0..7) is the e-stop; -1 none
   bool estop_active_high = true;
   std::optional<gpio::LineSpec> tick_line;
+  std::string listen_host;  ///< from --listen
+  int listen_port = 0;      ///< from --listen
 };
 
 /// Parses `args` (argv without the program name). `--opt value` and `--opt=value` forms. With

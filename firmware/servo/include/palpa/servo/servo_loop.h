@@ -18,6 +18,14 @@
 // (debounce); then the proxy restarts at the HIP (ProxyState reset) and the force ramps from 0 to
 // 100 % over `ramp_ticks`. Assertion is never debounced: stopping must not wait.
 //
+// Field swap (issue 7, docs/upload.md): another thread prepares a ServoField (verified blob,
+// sampler, proxy parameters) and offers it with OfferField (one atomic store). At the start of the
+// next tick the loop takes it with one atomic exchange, restarts the proxy in the new field (seeded
+// on the surface nearest the HIP, see SeedProxy) and cross-fades the force linearly from the last
+// force written in the old field to the new field's over `swap_ramp_ticks`; then it increments
+// field_epoch() (the acknowledgement: from then on the old field's memory is no longer read). The
+// loop never waits for, locks or allocates anything here.
+//
 // Watchdog hooks: tick_sequence() is odd while a tick runs; a watchdog thread (Watchdog) that sees
 // it stuck calls RequestFault, and the loop writes zero force as soon as the device call returns.
 //
@@ -69,6 +77,8 @@ enum TelemetryFlag : std::uint32_t {
   kFlagRamp = 1u << 2,       ///< force scaled down while ramping in after an e-stop
   kFlagOverrun = 1u << 3,    ///< the tick ended after the next deadline
   kFlagGpioError = 1u << 4,  ///< a GPIO access failed this tick
+  kFlagSwap = 1u << 5,       ///< this tick took a new field (OfferField) at its start
+  kFlagSwapRamp = 1u << 6,   ///< force scaled down while ramping in after a field swap
 };
 
 /// What one tick sends through the ring.
@@ -122,6 +132,7 @@ struct ServoConfig {
   bool estop_active_high = true;          ///< the level that asserts the e-stop
   std::uint32_t estop_release_ticks = 5;  ///< consecutive released reads before the release counts (≥ 1)
   std::uint32_t ramp_ticks = 500;         ///< ticks for the force to ramp 0 → 100 % after a release; 0: at once
+  std::uint32_t swap_ramp_ticks = 50;     ///< ticks for the force to ramp 0 → 100 % after a field swap; 0: at once
   /// Output toggled at the start of every tick; nullptr: none.
   gpio::DigitalOutput* tick_line = nullptr;
 };
@@ -140,6 +151,8 @@ struct ServoCounters {
   std::uint64_t gpio_errors = 0;   ///< failed e-stop reads (treated as asserted) and tick-line writes
   double max_force_n = 0;          ///< max |f| written, N
   double max_penetration_m = 0;    ///< max |X_p − X_h| in contact, m
+  std::uint64_t field_swaps = 0;   ///< fields taken from OfferField
+  std::uint64_t swap_seeds = 0;    ///< swaps whose proxy was seeded on the new surface (else restarted at the HIP)
 };
 static_assert(std::is_trivially_copyable_v<ServoCounters>);
 
@@ -161,6 +174,26 @@ enum class RunEnd {
   kWatchdogFault,  ///< the watchdog found a tick that did not complete
 };
 const char* RunEndName(RunEnd e);
+
+/// A field ready for the loop: the sampler over a verified view (its Lipschitz scan done), the grid
+/// frame and the proxy parameters for its voxel size. Built non-RT (O(grid) scan); the blob buffer
+/// the view reads must outlive it. Immutable once built, so the loop may read it from another
+/// thread's construction after the release/acquire hand-over of OfferField.
+struct ServoField {
+  ServoField(const blob::FieldView& field, const proxy::ProxyParams& proxy_params, std::uint64_t bytes = 0)
+      : sampler(field),
+        frame(proxy::GridFrame::Of(field)),
+        params(proxy_params),
+        crc32c(field.crc32c),
+        dims(field.dims),
+        blob_bytes(bytes) {}
+  sampler::TrilinearSampler sampler;
+  proxy::GridFrame frame;
+  proxy::ProxyParams params;
+  std::uint32_t crc32c = 0;            ///< the blob's CRC-32C
+  std::array<std::int32_t, 3> dims{};  ///< nodes per axis
+  std::uint64_t blob_bytes = 0;        ///< blob size (reporting)
+};
 
 class ServoLoop {
  public:
@@ -211,6 +244,19 @@ class ServoLoop {
   /// As rows(): each queued tick's compute time, ns (its own snapshot).
   std::span<const std::int64_t> tick_ns() const;
 
+  /// Any thread: offers `field` to the loop, which takes it at the start of its next tick (one
+  /// atomic exchange) and then increments field_epoch(). `field` must stay alive and unchanged
+  /// while offered and while in use. Returns the previously offered field that the loop had not
+  /// taken yet (withdrawn), or nullptr. Wait-free.
+  const ServoField* OfferField(const ServoField* field) noexcept {
+    return offered_.exchange(field, std::memory_order_acq_rel);
+  }
+  /// Fields taken so far; once it passes the value seen before OfferField, the previous field's
+  /// memory is no longer read by the loop. Any thread, acquire.
+  std::uint64_t field_epoch() const { return field_epoch_.load(std::memory_order_acquire); }
+  /// The loop's field (servo thread, or any thread after field_epoch() acknowledged it).
+  const ServoField& field() const { return *field_; }
+
   const proxy::ProxyState& proxy_state() const { return state_; }
   const proxy::GridFrame& frame() const { return frame_; }
 
@@ -220,9 +266,16 @@ class ServoLoop {
   void Publish();
   void WriteZeroForce();
   StepResult EnterFault(FaultCause cause);
+  void TakeOfferedField(const device::HipReading& reading, std::uint32_t& flags);
 
-  sampler::TrilinearSampler sampler_;
-  proxy::ProxyParams params_;
+  ServoField initial_;                               // the start-up field
+  const ServoField* field_ = &initial_;              // the field in use (servo thread)
+  std::atomic<const ServoField*> offered_{nullptr};  // OfferField → the next tick
+  std::atomic<std::uint64_t> field_epoch_{0};
+  std::uint32_t swap_ramp_tick_ = 0;  // ticks since the last swap, while ramping
+  bool swap_ramping_ = false;
+  std::array<double, 3> swap_hold_n_{};   // the force written just before the swap, N
+  std::array<double, 3> last_force_n_{};  // the last force written, N
   proxy::GridFrame frame_;
   proxy::ProxyState state_;
   device::HapticDevice& device_;

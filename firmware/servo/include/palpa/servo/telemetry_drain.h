@@ -19,6 +19,7 @@
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
+#include <mutex>
 #include <string>
 #include <utility>
 
@@ -62,6 +63,14 @@ struct DrainStatus {
   std::int64_t max_wake_latency_ns = 0;
   std::int64_t max_compute_ns = 0;
   std::array<double, 3> force_n{};
+  // The latest sample and counts derived from the flags (palpa status, issue 7).
+  std::array<double, 3> hip_m{};
+  std::array<double, 3> proxy_m{};
+  bool contact = false;
+  bool swap_ramp = false;
+  std::uint64_t force_clamps = 0;  ///< samples flagged kFlagClamped
+  std::uint64_t estop_events = 0;  ///< released → asserted transitions seen in the samples
+  std::uint64_t field_swaps = 0;   ///< samples flagged kFlagSwap
 };
 
 class TelemetryDrain {
@@ -82,6 +91,9 @@ class TelemetryDrain {
   std::uint64_t rows_written() const { return rows_written_.load(std::memory_order_acquire); }
   /// After Stop.
   const DrainStatus& status() const { return status_; }
+  /// Any thread, while running: a copy of the status as of the last drained batch (under a mutex
+  /// only the drain thread and readers take; the loop never sees it). Non-RT.
+  DrainStatus LiveStatus() const;
   /// The status JSON with `state`.
   std::string StatusJson(const char* state) const;
   /// Writes the status file now (before Start: to check the path). False if it could not be
@@ -99,6 +111,8 @@ class TelemetryDrain {
   std::atomic<bool> csv_failed_{false};
   std::atomic<std::uint64_t> rows_written_{0};
   DrainStatus status_;
+  mutable std::mutex live_mutex_;
+  DrainStatus live_;
   bool stopped_ = false;
 };
 

@@ -80,6 +80,36 @@ struct WideView {
   }
 };
 
+/// The same values read in place from blob v2's 4³ int16 octants (docs/blob-format.md): N nodes
+/// per axis (2: a cell's corners; 4: the wide stencil, nodes −1..2) span at most two octants per
+/// axis, so at most 8. Each node picks its octant by one bit per axis and adds its octant-local
+/// offset; a uniform brick or octant points at its own index or table entry's low half (its φ,
+/// little-endian) with mask 0, so every value is one branch-free load. Stored Q7.8, returned
+/// Q16.16 (·256).
+template <std::size_t N>
+struct BrickView {
+  std::array<const std::int16_t*, 8> octant;  // 4·sx + 2·sy + sz
+  std::array<std::uint32_t, 8> mask;          // 63 stored, 0 uniform
+  // Per axis and node: octant bit (4, 2, 1 or 0) << 16 | local offset (·16, ·4, ·1). The bits and
+  // offsets of the three axes are disjoint, so one sum gives both.
+  std::array<std::array<std::uint32_t, N>, 3> node;
+  constexpr std::int32_t Get(std::size_t a, std::size_t b, std::size_t c) const {
+    const std::uint32_t t = node[0][a] + node[1][b] + node[2][c];
+    const std::uint32_t s = t >> 16;
+    return std::int32_t{octant[s][t & mask[s]]} * 256;
+  }
+  // The WideStencil interface (N = 4: corner nodes are 1 and 2 on each axis).
+  static constexpr std::size_t kC = N == 4 ? 1 : 0;
+  constexpr std::int32_t Corner(std::size_t n) const {
+    return Get(kC + ((n >> 2) & 1), kC + ((n >> 1) & 1), kC + (n & 1));
+  }
+  constexpr std::int32_t XOut(std::size_t n) const { return Get((n & 4) ? 3 : 0, 1 + ((n >> 1) & 1), 1 + (n & 1)); }
+  constexpr std::int32_t YOut(std::size_t n) const { return Get(1 + ((n >> 2) & 1), (n & 2) ? 3 : 0, 1 + (n & 1)); }
+  constexpr std::int32_t ZOut(std::size_t n) const {
+    return Get(1 + ((n >> 2) & 1), 1 + ((n >> 1) & 1), (n & 1) ? 3 : 0);
+  }
+};
+
 /// Q16.16 linear interpolation a + (b−a)·t for t in [0, 65536], rounded to nearest (ties up).
 /// Exact in int64 for |a|, |b| < 2^30. Used by InterpolateCellGradient.
 constexpr std::int32_t Lerp(std::int32_t a, std::int32_t b, std::int32_t t) {
@@ -223,6 +253,50 @@ class TrilinearSampler {
 
   /// The 8 corner values of cell (i,j,k); requires 0 ≤ i < nx−1 etc. (Locate guarantees it).
   Stencil Fetch(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    if (phi_ == nullptr) {
+      // Cells with all 8 corners in one 8³ brick (7/8 per axis): one index entry, then each
+      // corner's octant from the brick's table (one 32-byte line) and its value.
+      if (((i & 7) != 7) & ((j & 7) != 7) & ((k & 7) != 7)) {
+        const std::uint32_t* slot =
+            index_ + (static_cast<std::ptrdiff_t>(i >> 3) * brick_dims_[1] + (j >> 3)) * brick_dims_[2] + (k >> 3);
+        const std::uint32_t e = *slot;
+        if ((e & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256);
+        const std::uint32_t* table = tables_ + 8 * static_cast<std::size_t>(e);
+        if (((i & 3) != 3) & ((j & 3) != 3) & ((k & 3) != 3)) {  // one octant: fixed offsets
+          const std::uint32_t* entry = table + (((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+          const std::uint32_t o = *entry;
+          if ((o & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(o & 0xFFFFU)} * 256);
+          const std::int16_t* b =
+              octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes + (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+          return {b[0] * 256, b[1] * 256, b[4] * 256, b[5] * 256, b[16] * 256, b[17] * 256, b[20] * 256, b[21] * 256};
+        }
+        // Per axis and corner: octant bit << 16 | octant-local offset, as in BrickView.
+        const std::uint32_t x0 =
+            ((static_cast<std::uint32_t>(i >> 2) & 1) << 18) | static_cast<std::uint32_t>((i & 3) << 4);
+        const std::uint32_t x1 =
+            ((static_cast<std::uint32_t>((i + 1) >> 2) & 1) << 18) | static_cast<std::uint32_t>(((i + 1) & 3) << 4);
+        const std::uint32_t y0 =
+            ((static_cast<std::uint32_t>(j >> 2) & 1) << 17) | static_cast<std::uint32_t>((j & 3) << 2);
+        const std::uint32_t y1 =
+            ((static_cast<std::uint32_t>((j + 1) >> 2) & 1) << 17) | static_cast<std::uint32_t>(((j + 1) & 3) << 2);
+        const std::uint32_t z0 = ((static_cast<std::uint32_t>(k >> 2) & 1) << 16) | static_cast<std::uint32_t>(k & 3);
+        const std::uint32_t z1 =
+            ((static_cast<std::uint32_t>((k + 1) >> 2) & 1) << 16) | static_cast<std::uint32_t>((k + 1) & 3);
+        const auto at = [&](std::uint32_t t) {
+          const std::uint32_t* entry = table + (t >> 16);
+          const std::uint32_t o = *entry;
+          const bool uniform = (o & blob::kSlotEmpty) != 0;
+          const std::int16_t* p = uniform ? reinterpret_cast<const std::int16_t*>(entry)
+                                          : octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes;
+          return std::int32_t{p[t & (uniform ? 0U : 63U)]} * 256;
+        };
+        return {at(x0 + y0 + z0), at(x0 + y0 + z1), at(x0 + y1 + z0), at(x0 + y1 + z1),
+                at(x1 + y0 + z0), at(x1 + y0 + z1), at(x1 + y1 + z0), at(x1 + y1 + z1)};
+      }
+      const BrickView<2> v = FetchBricks<2>(i, j, k);
+      return {v.Get(0, 0, 0), v.Get(0, 0, 1), v.Get(0, 1, 0), v.Get(0, 1, 1),
+              v.Get(1, 0, 0), v.Get(1, 0, 1), v.Get(1, 1, 0), v.Get(1, 1, 1)};
+    }
     const std::int32_t* b = phi_ + Offset(i, j, k);
     const std::ptrdiff_t si = stride_i_, sj = dims_[2];
     return {b[0], b[1], b[sj], b[sj + 1], b[si], b[si + 1], b[si + sj], b[si + sj + 1]};
@@ -243,9 +317,67 @@ class TrilinearSampler {
             k + 2 < dims_[2] ? 2 : 1};
   }
 
-  /// FetchWide's values copied out (for tests).
+  /// Blob v2: the nodes of cell (i,j,k) in place in the octants; N = 2: its corners (i, i+1 per
+  /// axis), N = 4: FetchWide's 32 values (i−1..i+2, face-clamped like FetchWide). Same
+  /// precondition as Fetch.
+  template <std::size_t N>
+  BrickView<N> FetchBricks(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    BrickView<N> v;
+    const std::array<std::int32_t, 3> cell = {i, j, k};
+    std::array<std::int32_t, 3> lo{};
+    constexpr std::array<std::int32_t, 3> kLocal = {16, 4, 1};
+    for (std::size_t a = 0; a < 3; ++a) {
+      const std::int32_t c = cell[a];
+      std::array<std::int32_t, N> node{};
+      if constexpr (N == 2) {
+        node = {c, c + 1};
+      } else {
+        node = {c > 0 ? c - 1 : c, c, c + 1, c + 2 < dims_[a] ? c + 2 : c + 1};
+      }
+      lo[a] = node[0] >> 2;
+      for (std::size_t m = 0; m < N; ++m) {
+        v.node[a][m] = (static_cast<std::uint32_t>((node[m] >> 2) - lo[a]) << (18 - a)) |
+                       static_cast<std::uint32_t>((node[m] & 3) * kLocal[a]);
+      }
+    }
+    // Per axis, the index offset and octant-table bit of the first and second octant (the second
+    // clamped to the last octant: it is then never selected, and the lookup stays in the index).
+    const std::array<std::ptrdiff_t, 3> stride = {static_cast<std::ptrdiff_t>(brick_dims_[1]) * brick_dims_[2],
+                                                  brick_dims_[2], 1};
+    std::array<std::array<std::ptrdiff_t, 2>, 3> off{};
+    std::array<std::array<std::uint32_t, 2>, 3> sub{};
+    for (std::size_t a = 0; a < 3; ++a) {
+      const std::int32_t o1 = std::min(lo[a] + 1, 2 * brick_dims_[a] - 1);
+      off[a] = {(lo[a] >> 1) * stride[a], (o1 >> 1) * stride[a]};
+      sub[a] = {static_cast<std::uint32_t>(lo[a] & 1) << (2 - a), static_cast<std::uint32_t>(o1 & 1) << (2 - a)};
+    }
+    for (std::size_t s = 0; s < 8; ++s) {
+      const std::size_t sx = s >> 2, sy = (s >> 1) & 1, sz = s & 1;
+      const std::uint32_t* slot = index_ + off[0][sx] + off[1][sy] + off[2][sz];
+      const std::uint32_t e = *slot;
+      // Select, don't branch: a uniform slot reads itself (the table address is then never used).
+      const bool uniform_slot = (e & blob::kSlotEmpty) != 0;
+      const std::uint32_t* table =
+          tables_ + 8 * static_cast<std::size_t>(uniform_slot ? 0 : e) + (sub[0][sx] | sub[1][sy] | sub[2][sz]);
+      const std::uint32_t* entry = uniform_slot ? slot : table;
+      const std::uint32_t t = *entry;
+      const bool uniform = (t & blob::kSlotEmpty) != 0;
+      v.octant[s] = uniform ? reinterpret_cast<const std::int16_t*>(entry)
+                            : octants_ + static_cast<std::size_t>(t) * blob::kOctantNodes;
+      v.mask[s] = uniform ? 0 : blob::kOctantNodes - 1;
+    }
+    return v;
+  }
+
+  /// FetchWide's values copied out (for tests); either storage.
   WideStencil CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    const WideView v = FetchWide(i, j, k);
+    if (phi_ == nullptr) return Copy(FetchBricks<4>(i, j, k));
+    return Copy(FetchWide(i, j, k));
+  }
+
+ private:
+  template <typename Wide>
+  static WideStencil Copy(const Wide& v) {
     WideStencil w;
     for (std::size_t n = 0; n < 8; ++n) {
       w.corner[n] = v.Corner(n);
@@ -256,7 +388,6 @@ class TrilinearSampler {
     return w;
   }
 
- private:
   struct Cell {
     std::int32_t i, j, k, fx, fy, fz;
   };
@@ -288,7 +419,13 @@ class TrilinearSampler {
     return s;
   }
 
-  const std::int32_t* phi_;
+  static Stencil Uniform8(std::int32_t c) { return {c, c, c, c, c, c, c, c}; }
+
+  const std::int32_t* phi_;      // v1 dense payload, or null for v2
+  const std::uint32_t* index_;   // v2 brick index
+  const std::uint32_t* tables_;  // v2 octant tables
+  const std::int16_t* octants_;  // v2 octants
+  std::array<std::int32_t, 3> brick_dims_;
   std::array<std::int32_t, 3> dims_;
   std::array<std::uint32_t, 3> last_;  // (n − 1)·65536 per axis
   std::ptrdiff_t stride_i_;
