@@ -35,7 +35,8 @@ struct Prepared {
   std::vector<Vec3d> hips_vox;  // the same HIPs in double voxels, for the reference
 };
 
-Vec3d ToVoxels(palpa::sampler::GridPos p) { return {p.x / 65536.0, p.y / 65536.0, p.z / 65536.0}; }
+using palpa::bench::ToFloat64;
+using palpa::bench::ToVoxels;
 
 struct Agreement {
   double max_proxy_vox = 0, max_force_n = 0;  // one tick from the same state
@@ -43,18 +44,6 @@ struct Agreement {
   int branch_mismatch = 0, ticks = 0, contact_ticks = 0;
   double mean_samples = 0;
 };
-
-Float64State ToFloat64(const palpa::proxy::ProxyState& s) {
-  Float64State f;
-  f.proxy = ToVoxels(s.proxy);
-  f.phi = s.phi / 65536.0;
-  f.grad = {s.grad[0] / 65536.0, s.grad[1] / 65536.0, s.grad[2] / 65536.0};
-  f.last_hip = ToVoxels(s.last_hip);
-  f.grad_valid = s.grad_valid;
-  f.seated = s.seated;
-  f.valid = s.valid;
-  return f;
-}
 
 void Accumulate(const palpa::proxy::TickResult& r, const Float64Result& q, double& max_proxy, double& max_force) {
   const Vec3d fp = ToVoxels(r.proxy);

@@ -137,6 +137,22 @@ struct Float64State {
   bool grad_valid = false, seated = false, valid = false;
 };
 
+/// A grid position (Q16.16 voxels) in double voxels.
+inline Vec3d ToVoxels(sampler::GridPos p) { return {p.x / 65536.0, p.y / 65536.0, p.z / 65536.0}; }
+
+/// The fixed-point tick's carried state in double, so both ticks can start from the same state.
+inline Float64State ToFloat64(const proxy::ProxyState& s) {
+  Float64State f;
+  f.proxy = ToVoxels(s.proxy);
+  f.phi = s.phi / 65536.0;
+  f.grad = {s.grad[0] / 65536.0, s.grad[1] / 65536.0, s.grad[2] / 65536.0};
+  f.last_hip = ToVoxels(s.last_hip);
+  f.grad_valid = s.grad_valid;
+  f.seated = s.seated;
+  f.valid = s.valid;
+  return f;
+}
+
 struct Float64Result {
   Vec3d proxy{};
   Vec3d force{};

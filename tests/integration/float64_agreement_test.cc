@@ -17,20 +17,6 @@
 namespace palpa::bench {
 namespace {
 
-Vec3d ToVoxels(sampler::GridPos p) { return {p.x / 65536.0, p.y / 65536.0, p.z / 65536.0}; }
-
-Float64State ToFloat64(const proxy::ProxyState& s) {
-  Float64State f;
-  f.proxy = ToVoxels(s.proxy);
-  f.phi = s.phi / 65536.0;
-  f.grad = {s.grad[0] / 65536.0, s.grad[1] / 65536.0, s.grad[2] / 65536.0};
-  f.last_hip = ToVoxels(s.last_hip);
-  f.grad_valid = s.grad_valid;
-  f.seated = s.seated;
-  f.valid = s.valid;
-  return f;
-}
-
 struct Agreement {
   double max_proxy_vox = 0;  // max over ticks and axes of |Δ proxy|
   double max_force_n = 0;    // max over ticks and axes of |Δ f|

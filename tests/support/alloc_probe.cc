@@ -7,7 +7,11 @@
 
 #include <cstddef>
 #include <cstdlib>
+#include <mutex>
 #include <new>
+#include <vector>
+
+#include <gtest/gtest.h>
 
 namespace palpa::alloc_probe {
 
@@ -22,6 +26,58 @@ void ResetCounters() {
   g_frees = 0;
   g_locks = 0;
   g_syscalls = 0;
+}
+
+void ExpectSeesMallocAndNew() {
+  ResetCounters();
+  {
+    const Armed armed;
+    void* volatile p = std::malloc(32);  // volatile: the compiler may not elide the pair
+    std::free(p);
+    int* volatile q = new int(7);
+    delete q;
+  }
+  EXPECT_GE(g_allocs.load(), 2);
+  EXPECT_GE(g_frees.load(), 2);
+}
+
+void ExpectSeesVectorGrowthInsideLibstdcxx() {
+  ResetCounters();
+  {
+    const Armed armed;
+    std::vector<int> v;
+    v.push_back(1);  // operator new called from the std::vector code
+    v.push_back(2);
+  }
+  EXPECT_GE(g_allocs.load(), 2);
+}
+
+void ExpectSeesMutexLock() {
+  ResetCounters();
+  std::mutex m;
+  {
+    const Armed armed;
+    const std::lock_guard<std::mutex> lock(m);
+  }
+  EXPECT_GE(g_locks.load(), 1);
+}
+
+void ExpectSeesSleepAndWrite() {
+  ResetCounters();
+  {
+    const Armed armed;
+    timespec ts{0, 1};
+    nanosleep(&ts, nullptr);
+    (void)!write(-1, "", 0);
+  }
+  EXPECT_EQ(g_syscalls.load(), 2);
+}
+
+void ExpectIgnoresCallsWhenDisarmed() {
+  ResetCounters();
+  void* volatile p = std::malloc(32);
+  std::free(p);
+  EXPECT_EQ(g_allocs.load(), 0);
 }
 
 }  // namespace palpa::alloc_probe

@@ -28,4 +28,13 @@ class Armed {
   Armed& operator=(const Armed&) = delete;
 };
 
+// The detector checks each executable that links the probe runs (without them, a 0 proves
+// nothing): armed, a malloc/free and a new/delete pair, std::vector growth inside libstdc++, a
+// std::mutex lock, a nanosleep and a write are each counted; disarmed, nothing is.
+void ExpectSeesMallocAndNew();
+void ExpectSeesVectorGrowthInsideLibstdcxx();
+void ExpectSeesMutexLock();
+void ExpectSeesSleepAndWrite();
+void ExpectIgnoresCallsWhenDisarmed();
+
 }  // namespace palpa::alloc_probe

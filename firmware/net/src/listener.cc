@@ -1,5 +1,7 @@
 #include "palpa/net_server/listener.h"
 
+#include "palpa/rt/clock.h"
+
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -22,19 +24,8 @@ constexpr std::size_t kChunk = 1 << 20;                // body read and MAC gran
 constexpr std::int64_t kMinRateBytesPerS = 256 << 10;  // slower bodies miss the overall deadline
 constexpr std::int64_t kMs = 1'000'000;
 
-void SleepNs(std::int64_t ns) {
-  timespec ts{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
-  nanosleep(&ts, nullptr);
-}
-
-template <typename T>
-std::span<const std::byte> Bytes(const T& v) {
-  return std::as_bytes(std::span<const T>(&v, 1));
-}
-template <typename T>
-std::span<std::byte> WritableBytes(T& v) {
-  return std::as_writable_bytes(std::span<T>(&v, 1));
-}
+using net::Bytes;
+using net::WritableBytes;
 
 std::string Hex32(std::uint32_t v) {
   char b[16];
@@ -308,14 +299,14 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
   const std::uint64_t epoch = loop_->field_epoch();
   (void)loop_->OfferField(&*dst.field);
   const std::int64_t ack_deadline = net::NowNs() + config_.ack_timeout_ms * kMs;
-  while (loop_->field_epoch() == epoch && net::NowNs() < ack_deadline) SleepNs(100'000);
+  while (loop_->field_epoch() == epoch && net::NowNs() < ack_deadline) rt::SleepForNs(100'000);
   if (loop_->field_epoch() == epoch) {
     if (loop_->OfferField(nullptr) == &*dst.field) {
       dst.field.reset();
       return refuse(net::Refusal::kBusy, "busy: the servo loop did not take the field within " +
                                              std::to_string(config_.ack_timeout_ms) + " ms (is it running?)");
     }
-    while (loop_->field_epoch() == epoch) SleepNs(10'000);  // taken just now: the ack follows at once
+    while (loop_->field_epoch() == epoch) rt::SleepForNs(10'000);  // taken just now: the ack follows at once
   }
   in_use_ = spare;  // acknowledged: the old buffer is the spare from now on
   accepted_.fetch_add(1, std::memory_order_acq_rel);

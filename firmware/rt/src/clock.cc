@@ -33,4 +33,9 @@ constinit SystemMonotonicClock g_clock;
 
 Clock& MonotonicClock() { return g_clock; }
 
+void SleepForNs(std::int64_t ns) {
+  const timespec ts{static_cast<time_t>(ns / kNsPerS), static_cast<long>(ns % kNsPerS)};
+  nanosleep(&ts, nullptr);
+}
+
 }  // namespace palpa::rt

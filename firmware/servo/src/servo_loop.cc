@@ -11,10 +11,7 @@ namespace {
 constexpr std::int64_t kFullRingWaitNs = 100'000;  // lockstep replay waiting for the drain: 0.1 ms naps
 
 // Lockstep replay only (not RT): a short relative sleep while the drain catches up.
-void Nap() {
-  timespec ts{0, kFullRingWaitNs};
-  nanosleep(&ts, nullptr);
-}
+void Nap() { rt::SleepForNs(kFullRingWaitNs); }
 
 // Restarts the proxy in a new field at the HIP `hip` (grid Q16.16). A HIP outside the object
 // (φ ≥ 0) restarts it there (ProxyState reset, exact). A HIP inside is projected onto the surface

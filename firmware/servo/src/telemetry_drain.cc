@@ -8,16 +8,8 @@
 namespace palpa::servo {
 namespace {
 
-std::int64_t MonotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return std::int64_t{ts.tv_sec} * rt::kNsPerS + ts.tv_nsec;
-}
-
-void SleepNs(std::int64_t ns) {
-  timespec ts{static_cast<time_t>(ns / rt::kNsPerS), static_cast<long>(ns % rt::kNsPerS)};
-  nanosleep(&ts, nullptr);
-}
+std::int64_t MonotonicNs() { return rt::MonotonicClock().NowNs(); }
+using rt::SleepForNs;
 
 constexpr int kBatch = 256;  // samples per pass before looking at the clock again
 
@@ -95,7 +87,7 @@ void TelemetryDrain::Body(void* self) {
       (void)d.WriteStatus("running");
       next_status += d.config_.status_period_ns;
     }
-    if (!took) SleepNs(d.config_.poll_ns);
+    if (!took) SleepForNs(d.config_.poll_ns);
   }
 }
 

@@ -5,16 +5,8 @@
 namespace palpa::servo {
 namespace {
 
-std::int64_t MonotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return std::int64_t{ts.tv_sec} * rt::kNsPerS + ts.tv_nsec;
-}
-
-void SleepNs(std::int64_t ns) {
-  timespec ts{static_cast<time_t>(ns / rt::kNsPerS), static_cast<long>(ns % rt::kNsPerS)};
-  nanosleep(&ts, nullptr);
-}
+std::int64_t MonotonicNs() { return rt::MonotonicClock().NowNs(); }
+using rt::SleepForNs;
 
 }  // namespace
 
@@ -36,7 +28,7 @@ void Watchdog::Body(void* self) {
   std::int64_t seen_at = MonotonicNs();
   std::uint64_t tripped_seq = ~std::uint64_t{0};
   while (!w.quit_.load(std::memory_order_acquire)) {
-    SleepNs(poll);
+    SleepForNs(poll);
     const std::uint64_t seq = w.loop_.tick_sequence();
     const std::int64_t now = MonotonicNs();
     if (seq != seen_seq) {

@@ -44,6 +44,28 @@ bool Finite3(const std::array<double, 3>& v) {
 
 std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob);
 
+// The header fields v1 and v2 share by name, each at its own version's offset: checked first,
+// then the version's own fields.
+template <class Header>
+std::expected<void, BlobError> CheckSharedFields(const Header& h) {
+  if (h.flags != 0) return Fail("flags", offsetof(Header, flags), "0x%08x has unknown bits set", h.flags);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (h.dims[a] < 2 || h.dims[a] > kMaxDim)
+      return Fail("dims", offsetof(Header, dims) + 4 * a, "axis %zu has %u nodes, allowed 2..%u", a, h.dims[a],
+                  kMaxDim);
+  }
+  if (!Finite3(h.origin_m)) return Fail("origin_m", offsetof(Header, origin_m), "not finite");
+  if (!(std::isfinite(h.voxel_m) && h.voxel_m > 0 && h.voxel_m < 1))
+    return Fail("voxel_m", offsetof(Header, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
+  if (h.method < static_cast<std::uint32_t>(Method::kErosion) ||
+      h.method > static_cast<std::uint32_t>(Method::kHermite))
+    return Fail("method", offsetof(Header, method), "%u is unknown", h.method);
+  if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))
+    return Fail("fit_scale", offsetof(Header, fit_scale), "%g must be finite and > 0", h.fit_scale);
+  if (!Finite3(h.fit_offset_m)) return Fail("fit_offset_m", offsetof(Header, fit_offset_m), "not finite");
+  return {};
+}
+
 }  // namespace
 
 std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc) {
@@ -75,27 +97,13 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
 
   HeaderV1 h;
   std::memcpy(&h, blob.data(), sizeof h);
-  if (h.flags != 0) return Fail("flags", offsetof(HeaderV1, flags), "0x%08x has unknown bits set", h.flags);
-  for (std::size_t a = 0; a < 3; ++a) {
-    if (h.dims[a] < 2 || h.dims[a] > kMaxDim)
-      return Fail("dims", offsetof(HeaderV1, dims) + 4 * a, "axis %zu has %u nodes, allowed 2..%u", a, h.dims[a],
-                  kMaxDim);
-  }
+  if (auto shared = CheckSharedFields(h); !shared) return std::unexpected(shared.error());
   if (h.value_format != kValueFormatQ16Voxels)
     return Fail("value_format", offsetof(HeaderV1, value_format), "%u is unknown (1 = int32 Q16.16 voxels)",
                 h.value_format);
-  if (!Finite3(h.origin_m)) return Fail("origin_m", offsetof(HeaderV1, origin_m), "not finite");
-  if (!(std::isfinite(h.voxel_m) && h.voxel_m > 0 && h.voxel_m < 1))
-    return Fail("voxel_m", offsetof(HeaderV1, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
   if (h.band_voxels < 1 || h.band_voxels > kMaxBandVoxels)
     return Fail("band_voxels", offsetof(HeaderV1, band_voxels), "%u, allowed 1..%u", h.band_voxels, kMaxBandVoxels);
-  if (h.method < static_cast<std::uint32_t>(Method::kErosion) ||
-      h.method > static_cast<std::uint32_t>(Method::kHermite))
-    return Fail("method", offsetof(HeaderV1, method), "%u is unknown", h.method);
   if (h.reserved0 != 0) return Fail("reserved0", offsetof(HeaderV1, reserved0), "must be zero");
-  if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))
-    return Fail("fit_scale", offsetof(HeaderV1, fit_scale), "%g must be finite and > 0", h.fit_scale);
-  if (!Finite3(h.fit_offset_m)) return Fail("fit_offset_m", offsetof(HeaderV1, fit_offset_m), "not finite");
   // Each dim ≤ 4096 = 2^12, so the product fits 2^36 and ·4 cannot overflow 64 bits.
   const std::uint64_t nodes = std::uint64_t{h.dims[0]} * h.dims[1] * h.dims[2];
   if (h.payload_size != nodes * 4)
@@ -230,28 +238,14 @@ std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob) {
 
   HeaderV2 h;
   std::memcpy(&h, blob.data(), sizeof h);
-  if (h.flags != 0) return Fail("flags", offsetof(HeaderV2, flags), "0x%08x has unknown bits set", h.flags);
-  for (std::size_t a = 0; a < 3; ++a) {
-    if (h.dims[a] < 2 || h.dims[a] > kMaxDim)
-      return Fail("dims", offsetof(HeaderV2, dims) + 4 * a, "axis %zu has %u nodes, allowed 2..%u", a, h.dims[a],
-                  kMaxDim);
-  }
+  if (auto shared = CheckSharedFields(h); !shared) return std::unexpected(shared.error());
   if (h.value_format != kValueFormatQ7_8Voxels)
     return Fail("value_format", offsetof(HeaderV2, value_format), "%u is unknown (2 = int16 Q7.8 voxels)",
                 h.value_format);
-  if (!Finite3(h.origin_m)) return Fail("origin_m", offsetof(HeaderV2, origin_m), "not finite");
-  if (!(std::isfinite(h.voxel_m) && h.voxel_m > 0 && h.voxel_m < 1))
-    return Fail("voxel_m", offsetof(HeaderV2, voxel_m), "%g m is outside (0, 1)", h.voxel_m);
   if (h.band_inside < 1 || h.band_inside > kMaxBandVoxels)
     return Fail("band_inside", offsetof(HeaderV2, band_inside), "%u, allowed 1..%u", h.band_inside, kMaxBandVoxels);
   if (h.band_outside < 1 || h.band_outside > kMaxBandVoxels)
     return Fail("band_outside", offsetof(HeaderV2, band_outside), "%u, allowed 1..%u", h.band_outside, kMaxBandVoxels);
-  if (h.method < static_cast<std::uint32_t>(Method::kErosion) ||
-      h.method > static_cast<std::uint32_t>(Method::kHermite))
-    return Fail("method", offsetof(HeaderV2, method), "%u is unknown", h.method);
-  if (!(std::isfinite(h.fit_scale) && h.fit_scale > 0))
-    return Fail("fit_scale", offsetof(HeaderV2, fit_scale), "%g must be finite and > 0", h.fit_scale);
-  if (!Finite3(h.fit_offset_m)) return Fail("fit_offset_m", offsetof(HeaderV2, fit_offset_m), "not finite");
   // dims ≤ 2^12, so brick_dims ≤ 2^9 and slots ≤ 2^27; the counts are checked against slots
   // before use, so every size below is < 2^40 and no sum can overflow 64 bits.
   std::uint64_t slots = 1;

@@ -23,15 +23,6 @@ NetError Err(NetErrorCode code, std::string message) {
 
 std::string Where(const Endpoint& e) { return e.host + ":" + std::to_string(e.port); }
 
-template <typename T>
-std::span<const std::byte> Bytes(const T& v) {
-  return std::as_bytes(std::span<const T>(&v, 1));
-}
-template <typename T>
-std::span<std::byte> WritableBytes(T& v) {
-  return std::as_writable_bytes(std::span<T>(&v, 1));
-}
-
 NetError IoErr(IoResult r, const Endpoint& to, const char* doing) {
   switch (r) {
     case IoResult::kTimeout:

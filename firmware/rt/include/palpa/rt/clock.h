@@ -31,4 +31,8 @@ class Clock {
 /// does not accumulate. Thread-safe (stateless).
 Clock& MonotonicClock();
 
+/// Sleeps at least `ns` nanoseconds on CLOCK_MONOTONIC (relative): the polls and naps of the
+/// helper threads (drain, watchdog, listener), never the paced loop. Non-RT.
+void SleepForNs(std::int64_t ns);
+
 }  // namespace palpa::rt

@@ -11,6 +11,17 @@
 
 namespace palpa::net {
 
+/// One trivially copyable value (a header, a reply) as the bytes that go on the wire.
+template <typename T>
+std::span<const std::byte> Bytes(const T& v) {
+  return std::as_bytes(std::span<const T>(&v, 1));
+}
+/// The same, to receive into.
+template <typename T>
+std::span<std::byte> WritableBytes(T& v) {
+  return std::as_writable_bytes(std::span<T>(&v, 1));
+}
+
 /// CLOCK_MONOTONIC now, ns.
 std::int64_t NowNs();
 
