@@ -165,9 +165,7 @@ try {
   }
 
   // ---- live ----
-  if (args['live-skip']) {
-    console.log(`SKIP  live: ${args['live-skip']}`);
-  } else if (args.live) {
+  if (args.live) {
     const live = await openPage(browser, args.live, 'live');
     await waitFor(live.page, () => window.palpaView.live && typeof window.palpaView.live.ticks === 'number', 20000,
       'the first live status');
