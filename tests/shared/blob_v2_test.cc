@@ -279,6 +279,17 @@ TEST(BlobV2, SamplerInPlaceEqualsDenseSamplingBitForBit) {
           static_cast<std::int32_t>((g.c[1] + rad * d[1] / l) * 65536),
           static_cast<std::int32_t>((g.c[2] + rad * d[2] / l) * 65536));
   }
+  // Every cell's 32 wide-stencil values, as the float64 reference reads them (CopyWide): interior
+  // cells through RowView's 16 forms, face cells through the general gather.
+  for (std::int32_t a = 0; a + 1 < 45; ++a)
+    for (std::int32_t b = 0; b + 1 < 38; ++b)
+      for (std::int32_t c = 0; c + 1 < 30; ++c) {
+        const auto w2 = s2.CopyWide(a, b, c), w1 = s1.CopyWide(a, b, c);
+        ASSERT_EQ(w2.corner, w1.corner) << a << ' ' << b << ' ' << c;
+        ASSERT_EQ(w2.x_out, w1.x_out) << a << ' ' << b << ' ' << c;
+        ASSERT_EQ(w2.y_out, w1.y_out) << a << ' ' << b << ' ' << c;
+        ASSERT_EQ(w2.z_out, w1.z_out) << a << ' ' << b << ' ' << c;
+      }
   // The last nodes of the grid (the outer-face clamps of the wide stencil).
   check(44 << 16, 37 << 16, 29 << 16);
   check((44 << 16) - 1, (37 << 16) - 7, 29 << 16);

@@ -110,6 +110,30 @@ struct BrickView {
   }
 };
 
+/// Blob v2's wide stencil for an interior cell (no face-clamped node), read in place. Along each
+/// axis the nodes i−1..i+2 start at local coordinate l = (i−1) mod 4 of an octant and spill into
+/// the next octant after 4 − l nodes, so node (a, b, c) of the stencil (each 0..3) lies in octant
+/// s = 4·[lx + a ≥ 4] + 2·[ly + b ≥ 4] + [lz + c ≥ 4] at local offset
+/// 16·lx + 4·ly + lz + 16a + 4b + c − (64·sx + 16·sy + 4·sz). With the octant's address moved by
+/// everything but 16a + 4b + c (`row`, one per z-row (a, b) and z-octant h), every value is one
+/// load at a constant offset; lz = Lz is a template parameter so that h is known too. Addresses are
+/// integers because a moved address may lie outside its octant (only the sums are dereferenced).
+/// Values stay Q7.8 (kValueShift = 8): InterpolateSmooth folds the ·256 into its final shifts.
+template <int Lz>
+struct RowView {
+  static constexpr int kValueShift = 8;
+  using Rows = std::array<std::array<std::array<std::uintptr_t, 2>, 4>, 4>;
+  const Rows& row;
+  std::int32_t Get(std::size_t a, std::size_t b, std::size_t c) const {
+    const std::size_t h = (static_cast<std::size_t>(Lz) + c) >> 2;
+    return *reinterpret_cast<const std::int16_t*>(row[a][b][h] + 2 * (16 * a + 4 * b + c));
+  }
+  std::int32_t Corner(std::size_t n) const { return Get(1 + ((n >> 2) & 1), 1 + ((n >> 1) & 1), 1 + (n & 1)); }
+  std::int32_t XOut(std::size_t n) const { return Get((n & 4) ? 3 : 0, 1 + ((n >> 1) & 1), 1 + (n & 1)); }
+  std::int32_t YOut(std::size_t n) const { return Get(1 + ((n >> 2) & 1), (n & 2) ? 3 : 0, 1 + (n & 1)); }
+  std::int32_t ZOut(std::size_t n) const { return Get(1 + ((n >> 2) & 1), 1 + ((n >> 1) & 1), (n & 1) ? 3 : 0); }
+};
+
 /// Q16.16 linear interpolation a + (b−a)·t for t in [0, 65536], rounded to nearest (ties up).
 /// Exact in int64 for |a|, |b| < 2^30. Used by InterpolateCellGradient.
 constexpr std::int32_t Lerp(std::int32_t a, std::int32_t b, std::int32_t t) {
@@ -168,13 +192,21 @@ constexpr Sample InterpolateCellGradient(const Stencil& v, std::int32_t fx, std:
 /// φ (bit-identical to InterpolatePhi of the corners) and the continuous gradient: the central
 /// differences at the 8 corners, interpolated with the same trilinear weights. Derivatives are
 /// carried doubled and halved, rounded, at the end.
-template <typename Wide>  // WideStencil or WideView
-constexpr Sample InterpolateSmooth(const Wide& s, std::int32_t fx, std::int32_t fy, std::int32_t fz) {
+/// A stencil whose values are Q16.16 >> kValueShift (RowView: 8, its stored Q7.8) gives the same
+/// bits: with v = u·2^s, (Σw·v + 2^31) >> 32 = (Σw·u + 2^(31−s)) >> (32 − s), and likewise for the
+/// gradient's >> 33.
+template <typename Wide>  // WideStencil, WideView, BrickView or RowView
+[[gnu::always_inline]] inline constexpr Sample InterpolateSmooth(const Wide& s, std::int32_t fx, std::int32_t fy,
+                                                                 std::int32_t fz) {
+  constexpr int kShift = [] {
+    if constexpr (requires { Wide::kValueShift; }) return Wide::kValueShift;
+    return 0;
+  }();
   const Weights w = TrilinearWeights(fx, fy, fz);
-  std::int64_t phi = std::int64_t{1} << 31, gx = 0, gy = 0, gz = 0;
+  std::int64_t phi = std::int64_t{1} << (31 - kShift), gx = 0, gy = 0, gz = 0;
   // One z-column (dx, dy) at a time: its corners n0, n0 + 1, their weights, and φ and the three
   // doubled central differences at each (the outer neighbour against the corner across the cell).
-  const auto column = [&](std::size_t c) {
+  const auto column = [&](std::size_t c) __attribute__((always_inline)) {
     const std::size_t n0 = 2 * c, n1 = n0 + 1;
     const std::int64_t w0 = w.z0[c], w1 = w.xy[c] - w0;
     const std::int64_t v0 = s.Corner(n0), v1 = s.Corner(n1);
@@ -196,10 +228,11 @@ constexpr Sample InterpolateSmooth(const Wide& s, std::int32_t fx, std::int32_t 
   column(2);
   column(3);
   Sample out;
-  out.phi = static_cast<std::int32_t>(phi >> 32);
-  constexpr std::int64_t kHalf = std::int64_t{1} << 32;  // rounding for the final >> 33 (doubled)
-  out.grad = {static_cast<std::int32_t>((gx + kHalf) >> 33), static_cast<std::int32_t>((gy + kHalf) >> 33),
-              static_cast<std::int32_t>((gz + kHalf) >> 33)};
+  out.phi = static_cast<std::int32_t>(phi >> (32 - kShift));
+  constexpr int kG = 33 - kShift;                              // doubled differences: one more bit
+  constexpr std::int64_t kHalf = std::int64_t{1} << (kG - 1);  // rounding
+  out.grad = {static_cast<std::int32_t>((gx + kHalf) >> kG), static_cast<std::int32_t>((gy + kHalf) >> kG),
+              static_cast<std::int32_t>((gz + kHalf) >> kG)};
   out.in_grid = true;
   return out;
 }
@@ -370,20 +403,21 @@ class TrilinearSampler {
   }
 
   /// FetchWide's values copied out (for tests); either storage.
-  WideStencil CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    if (phi_ == nullptr) return Copy(FetchBricks<4>(i, j, k));
-    return Copy(FetchWide(i, j, k));
-  }
+  WideStencil CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const;
 
  private:
   template <typename Wide>
   static WideStencil Copy(const Wide& v) {
+    constexpr int kShift = [] {
+      if constexpr (requires { Wide::kValueShift; }) return Wide::kValueShift;
+      return 0;
+    }();
     WideStencil w;
     for (std::size_t n = 0; n < 8; ++n) {
-      w.corner[n] = v.Corner(n);
-      w.x_out[n] = v.XOut(n);
-      w.y_out[n] = v.YOut(n);
-      w.z_out[n] = v.ZOut(n);
+      w.corner[n] = v.Corner(n) * (1 << kShift);
+      w.x_out[n] = v.XOut(n) * (1 << kShift);
+      w.y_out[n] = v.YOut(n) * (1 << kShift);
+      w.z_out[n] = v.ZOut(n) * (1 << kShift);
     }
     return w;
   }
@@ -391,6 +425,18 @@ class TrilinearSampler {
   struct Cell {
     std::int32_t i, j, k, fx, fy, fz;
   };
+
+  // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: `use` applied to the cell's
+  // RowView (in one of its 16 forms), returning R. At() and CopyWide() read bricks through it.
+  template <typename R, typename Use>
+  R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const Use& use) const;
+  // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks<4> reads those).
+  bool FaceCell(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    // One unsigned compare per axis: interior is 1 ≤ cell ≤ n − 3 (none when n < 4).
+    return (static_cast<std::uint32_t>(i - 1) >= static_cast<std::uint32_t>(dims_[0] - 3)) |
+           (static_cast<std::uint32_t>(j - 1) >= static_cast<std::uint32_t>(dims_[1] - 3)) |
+           (static_cast<std::uint32_t>(k - 1) >= static_cast<std::uint32_t>(dims_[2] - 3));
+  }
 
   // Cell and fractions of `p`, or false outside [0, n−1]³. On the last node of an axis: the last
   // cell at fraction 1 (cell = min(⌊x⌋, n − 2), fraction = x − cell).
