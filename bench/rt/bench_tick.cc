@@ -57,7 +57,7 @@ void Accumulate(const palpa::proxy::TickResult& r, const Float64Result& q, doubl
 // docs/realtime-core.md is about: the arithmetic), and over free-running trajectories (where a
 // budget-bound, unconverged iteration lets tiny differences take different but valid paths).
 Agreement Compare(const palpa::bench::Field& f, const palpa::proxy::ProxyParams& params, const Prepared& p) {
-  const Float64Field ref(f.view, f.sampler->lipschitz());
+  const Float64Field ref(f.Stored(), *f.sampler);
   const Float64Params rp = Float64Params::Of(params);
   palpa::proxy::ProxyState s;
   Float64State run;
@@ -84,6 +84,8 @@ Agreement Compare(const palpa::bench::Field& f, const palpa::proxy::ProxyParams&
   return a;
 }
 
+// One servo tick per iteration over the scenario's HIPs, on the blob as stored (as palpad samples
+// it).
 void FixedTick(benchmark::State& state, const palpa::bench::Field* f, const palpa::proxy::ProxyParams* params,
                const Prepared* p) {
   const auto& ticks = p->scenario.ticks;
@@ -97,9 +99,10 @@ void FixedTick(benchmark::State& state, const palpa::bench::Field* f, const palp
   state.SetItemsProcessed(state.iterations());
 }
 
+// The float64 reference on the same storage.
 void ReferenceTick(benchmark::State& state, const palpa::bench::Field* f, const palpa::proxy::ProxyParams* params,
                    const Prepared* p) {
-  const Float64Field ref(f->view, f->sampler->lipschitz());
+  const Float64Field ref(f->Stored(), *f->sampler);
   const Float64Params rp = Float64Params::Of(*params);
   const auto& ticks = p->scenario.ticks;
   Float64State s;

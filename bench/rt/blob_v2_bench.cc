@@ -28,7 +28,8 @@ struct Fixture {
   palpa::blob::FieldView v2;
   std::vector<std::int32_t> dense;
   palpa::blob::FieldView v1;
-  std::vector<GridPos> points;
+  std::vector<GridPos> points;                    // random, in band
+  std::vector<GridPos> strokes;                   // coherent walks
   std::vector<std::array<std::int32_t, 3>> octs;  // octants of the points' cells, for the lookups
 };
 
@@ -92,29 +93,48 @@ bool Prepare(const std::string& path) {
       f.octs.push_back({p.x >> 18, p.y >> 18, p.z >> 18});
     }
   }
+  // Strokes: 64 walks of 64 steps of 0.1 voxel from in-band points, in random directions (the
+  // coherent pattern of a servo loop, where a proxy moves ≤ a voxel per tick).
+  std::normal_distribution<double> nd;
+  for (std::size_t w = 0; w < 64; ++w) {
+    double d[3] = {nd(rng), nd(rng), nd(rng)};
+    const double l = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    GridPos p = f.points[w * 61];
+    for (std::size_t n = 0; n < 64; ++n) {
+      f.strokes.push_back(p);
+      const GridPos q{p.x + static_cast<std::int32_t>(6554 * d[0] / l),
+                      p.y + static_cast<std::int32_t>(6554 * d[1] / l),
+                      p.z + static_cast<std::int32_t>(6554 * d[2] / l)};
+      if (q.x >= 0 && q.y >= 0 && q.z >= 0 && q.x <= (f.v2.dims[0] - 1) << 16 && q.y <= (f.v2.dims[1] - 1) << 16 &&
+          q.z <= (f.v2.dims[2] - 1) << 16)
+        p = q;
+    }
+  }
   std::printf("field: %d x %d x %d nodes, %u bricks, %u octants, %zu bytes; %zu in-band points\n", f.v2.dims[0],
               f.v2.dims[1], f.v2.dims[2], f.v2.brick_count, f.v2.octant_count, f.bytes.size(), f.points.size());
   return true;
 }
 
-template <bool kBricks>
+template <bool kBricks, bool kStrokes>
 void BM_Phi(benchmark::State& state) {
   const Fixture& f = Get();
   const TrilinearSampler s(kBricks ? f.v2 : f.v1);
+  const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
   std::size_t n = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(s.Phi(f.points[n]));
+    benchmark::DoNotOptimize(s.Phi(points[n]));
     n = (n + 1) & 4095;
   }
 }
 
-template <bool kBricks>
+template <bool kBricks, bool kStrokes>
 void BM_At(benchmark::State& state) {
   const Fixture& f = Get();
   const TrilinearSampler s(kBricks ? f.v2 : f.v1);
+  const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
   std::size_t n = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(s.At(f.points[n]));
+    benchmark::DoNotOptimize(s.At(points[n]));
     n = (n + 1) & 4095;
   }
 }
@@ -187,10 +207,14 @@ void BM_LookupHash(benchmark::State& state) {
   state.counters["index_bytes"] = static_cast<double>(cap * 8);
 }
 
-BENCHMARK(BM_Phi<false>)->Name("Phi/dense");
-BENCHMARK(BM_Phi<true>)->Name("Phi/bricks");
-BENCHMARK(BM_At<false>)->Name("At/dense");
-BENCHMARK(BM_At<true>)->Name("At/bricks");
+BENCHMARK(BM_Phi<false, false>)->Name("Phi/dense");
+BENCHMARK(BM_Phi<true, false>)->Name("Phi/bricks");
+BENCHMARK(BM_At<false, false>)->Name("At/dense");
+BENCHMARK(BM_At<true, false>)->Name("At/bricks");
+BENCHMARK(BM_Phi<false, true>)->Name("Phi_strokes/dense");
+BENCHMARK(BM_Phi<true, true>)->Name("Phi_strokes/bricks");
+BENCHMARK(BM_At<false, true>)->Name("At_strokes/dense");
+BENCHMARK(BM_At<true, true>)->Name("At_strokes/bricks");
 BENCHMARK(BM_LookupDenseIndex)->Name("Lookup/dense_index");
 BENCHMARK(BM_LookupHash)->Name("Lookup/hash");
 

@@ -1,10 +1,11 @@
 // A plain float64 implementation of the same equations as shared/ (trilinear φ, continuous
 // gradient, the certified proxy tick of paper eq. 9 and the force of eq. 10), written for the
 // benchmark: the fixed-point tick must not be slower than this and must agree with it within the
-// tolerances in docs/realtime-core.md § Float64 reference. Same control flow, same field data
-// (the blob's int32 values, scaled by 2^−16 when fetched), same Lipschitz bound; positions in
-// voxels (grid frame) as double. Like shared/, the sampler and the tick are out of line
-// (float64_proxy.cc), compiled with the same flags.
+// tolerances in docs/realtime-core.md § Float64 reference. Same control flow, same field data in the
+// same storage (a dense blob's int32 values; on blob v2 the bricks, gathered by the fixed-point
+// sampler's own Fetch and CopyWide, since storage is not what the comparison is about), scaled by
+// 2^−16 when fetched, same Lipschitz bound; positions in voxels (grid frame) as double. Like shared/, the sampler and
+// the tick are out of line (float64_proxy.cc), compiled with the same flags.
 #pragma once
 
 #include <algorithm>
@@ -28,14 +29,16 @@ struct Float64Sample {
 
 class Float64Field {
  public:
-  explicit Float64Field(const blob::FieldView& f, const sampler::LipschitzBound& lb)
+  /// `s` samples `f` (its Lipschitz bound and background are used; on blob v2 it also fetches).
+  Float64Field(const blob::FieldView& f, const sampler::TrilinearSampler& s)
       : phi_(f.phi),
+        sampler_(&s),
         dims_(f.dims),
         si_(static_cast<std::ptrdiff_t>(f.dims[1]) * f.dims[2]),
-        background_(f.band_voxels),
-        norm_(lb.norm / 65536.0),
-        norm_helps_(lb.norm_helps),
-        axis_{lb.axis[0] / 65536.0, lb.axis[1] / 65536.0, lb.axis[2] / 65536.0} {}
+        background_(s.background() / 65536.0),
+        norm_(s.lipschitz().norm / 65536.0),
+        norm_helps_(s.lipschitz().norm_helps),
+        axis_{s.lipschitz().axis[0] / 65536.0, s.lipschitz().axis[1] / 65536.0, s.lipschitz().axis[2] / 65536.0} {}
 
   double norm() const { return norm_; }
   bool norm_helps() const { return norm_helps_; }
@@ -48,6 +51,10 @@ class Float64Field {
   double PhiInline(const Vec3d& x) const {
     Cell c;
     if (!Locate(x, c)) return background_;
+    if (phi_ == nullptr) {  // blob v2: the bricks' values, fetched as the fixed-point sampler does
+      const sampler::Stencil v = sampler_->Fetch(c.i[0], c.i[1], c.i[2]);
+      return Tri(V(v[0]), V(v[1]), V(v[2]), V(v[3]), V(v[4]), V(v[5]), V(v[6]), V(v[7]), c.f);
+    }
     const std::int32_t* b = phi_ + Offset(c);
     const std::ptrdiff_t sj = dims_[2];
     return Tri(V(b[0]), V(b[1]), V(b[sj]), V(b[sj + 1]), V(b[si_]), V(b[si_ + 1]), V(b[si_ + sj]), V(b[si_ + sj + 1]),
@@ -61,6 +68,7 @@ class Float64Field {
       s.phi = background_;
       return s;
     }
+    if (phi_ == nullptr) return FromWide(sampler_->CopyWide(c.i[0], c.i[1], c.i[2]), c);
     const std::int32_t* b = phi_ + Offset(c);
     const std::ptrdiff_t si = si_, sj = dims_[2];
     const std::ptrdiff_t xm = c.i[0] > 0 ? -si : 0, xp = c.i[0] + 2 < dims_[0] ? 2 * si : si;
@@ -86,6 +94,22 @@ class Float64Field {
     std::array<std::int32_t, 3> i;
     Vec3d f;
   };
+  // φ and the gradient from the 32 values of a wide stencil (blob v2), as AtInline's dense path.
+  static Float64Sample FromWide(const sampler::WideStencil& w, const Cell& c) {
+    double v[8], gx[8], gy[8], gz[8];
+    for (std::size_t n = 0; n < 8; ++n) v[n] = V(w.corner[n]);
+    for (std::size_t n = 0; n < 8; ++n) {
+      gx[n] = (n & 4) ? V(w.x_out[n]) - v[n - 4] : v[n + 4] - V(w.x_out[n]);
+      gy[n] = (n & 2) ? V(w.y_out[n]) - v[n - 2] : v[n + 2] - V(w.y_out[n]);
+      gz[n] = (n & 1) ? V(w.z_out[n]) - v[n - 1] : v[n + 1] - V(w.z_out[n]);
+    }
+    Float64Sample s;
+    s.phi = Tri(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], c.f);
+    s.grad = {0.5 * Tri(gx[0], gx[1], gx[2], gx[3], gx[4], gx[5], gx[6], gx[7], c.f),
+              0.5 * Tri(gy[0], gy[1], gy[2], gy[3], gy[4], gy[5], gy[6], gy[7], c.f),
+              0.5 * Tri(gz[0], gz[1], gz[2], gz[3], gz[4], gz[5], gz[6], gz[7], c.f)};
+    return s;
+  }
   static double V(std::int32_t raw) { return raw * (1.0 / 65536.0); }
   static double Lerp(double a, double b, double t) { return a + (b - a) * t; }
   static double Tri(double v0, double v1, double v2, double v3, double v4, double v5, double v6, double v7,
@@ -108,7 +132,8 @@ class Float64Field {
     return static_cast<std::ptrdiff_t>(c.i[0]) * si_ + static_cast<std::ptrdiff_t>(c.i[1]) * dims_[2] + c.i[2];
   }
 
-  const std::int32_t* phi_;
+  const std::int32_t* phi_;  // dense values, or null: blob v2, fetched through sampler_
+  const sampler::TrilinearSampler* sampler_;
   std::array<std::int32_t, 3> dims_;
   std::ptrdiff_t si_;
   double background_;

@@ -108,7 +108,7 @@ std::unique_ptr<Field> PlateField(std::uint32_t n, double voxel_m, const std::ar
 
 Scenario SurfaceStrokes(const Field& f, const std::string& name, double depth_m, double speed_m_s, int strokes,
                         int ticks_per_stroke, std::uint32_t seed) {
-  const Float64Field field(f.view, f.sampler->lipschitz());
+  const Float64Field field(f.view, *f.sampler);  // reads view's dense values
   const double voxel = f.view.voxel_m;
   // Surface seeds: the zero crossings along grid x-edges, in node order.
   std::vector<Vec3d> crossings;

@@ -25,7 +25,9 @@ struct Field {
   blob::FieldView view;
   std::vector<std::byte> stored_bytes;  ///< empty: `bytes` is the stored form
   blob::FieldView stored_view;
-  std::unique_ptr<sampler::TrilinearSampler> sampler;
+  std::unique_ptr<sampler::TrilinearSampler> sampler;  ///< samples the stored form
+  /// The blob as stored: stored_view, or view when that is the stored form.
+  const blob::FieldView& Stored() const { return stored_bytes.empty() ? view : stored_view; }
 };
 
 /// Reads and verifies a .palpa blob; exits with a message naming the file on any error.

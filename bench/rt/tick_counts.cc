@@ -29,7 +29,7 @@ bool g_reference = false;  // --reference: count the float64 reference tick inst
 void Run(const palpa::bench::Field& f, const palpa::bench::Scenario& s) {
   if (!g_only.empty() && s.name != g_only) return;
   const auto params = palpa::proxy::MakeProxyParams({}, f.view.voxel_m).value();
-  const palpa::bench::Float64Field ref(f.view, f.sampler->lipschitz());
+  const palpa::bench::Float64Field ref(f.Stored(), *f.sampler);  // the storage the fixed tick reads
   const palpa::bench::Float64Params ref_params = palpa::bench::Float64Params::Of(params);
   palpa::proxy::ProxyState state;
   palpa::bench::Float64State ref_state;

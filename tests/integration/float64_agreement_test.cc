@@ -26,7 +26,7 @@ struct Agreement {
 
 Agreement Compare(const Field& f, const Scenario& s) {
   const proxy::ProxyParams params = proxy::MakeProxyParams({}, f.view.voxel_m).value();
-  const Float64Field ref(f.view, f.sampler->lipschitz());
+  const Float64Field ref(f.Stored(), *f.sampler);  // the storage the fixed tick reads
   const Float64Params rp = Float64Params::Of(params);
   proxy::ProxyState state;
   Agreement a;
