@@ -89,56 +89,6 @@ template <int Lx, int Lz, typename R, typename Use>
 
 }  // namespace
 
-// The corners (a, b, c) of a cell lie in octant (sx·a, sy·b, sz·c) from the cell's own, with
-// (sx, sy, sz) the bits of Split, at local offset 16·lx + 4·ly + lz + 16a + 4b + c − (64·sx·a +
-// 16·sy·b + 4·sz·c): as in RowView, each octant's address is moved once and every corner is a load
-// at a constant offset. A uniform octant keeps its entry's address and a zero offset mask.
-template <int Split>
-[[gnu::always_inline]] inline Stencil TrilinearSampler::Corners(std::int32_t i, std::int32_t j, std::int32_t k) const {
-  constexpr int sx = (Split >> 2) & 1, sy = (Split >> 1) & 1, sz = Split & 1;
-  const auto shift = 2 * static_cast<std::uintptr_t>(16 * (i & 3) + 4 * (j & 3) + (k & 3));
-  const std::int32_t qx = i >> 2, qy = j >> 2, qz = k >> 2;
-  std::array<std::uintptr_t, 8> moved{};
-  std::array<std::uintptr_t, 8> mask{};
-  for (int s = 0; s < 8; ++s) {
-    const int ox = (s >> 2) & sx, oy = (s >> 1) & sy, oz = s & sz;
-    if (s != 4 * ox + 2 * oy + oz) continue;  // the same octant as a smaller s
-    const std::uint32_t* entry = OctantEntry(qx + ox, qy + oy, qz + oz);
-    const std::uint32_t o = *entry;
-    const bool uniform = (o & blob::kSlotEmpty) != 0;
-    const auto u = static_cast<std::size_t>(s);
-    moved[u] = uniform ? reinterpret_cast<std::uintptr_t>(entry)
-                       : reinterpret_cast<std::uintptr_t>(octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes) +
-                             shift - 2 * static_cast<std::uintptr_t>(64 * ox + 16 * oy + 4 * oz);
-    mask[u] = uniform ? 0 : ~std::uintptr_t{0};
-  }
-  const auto at = [&](int a, int b, int c) __attribute__((always_inline)) {
-    const auto s = static_cast<std::size_t>(4 * (sx & a) + 2 * (sy & b) + (sz & c));
-    const std::uintptr_t off = 2 * static_cast<std::uintptr_t>(16 * a + 4 * b + c);
-    return std::int32_t{*reinterpret_cast<const std::int16_t*>(moved[s] + (off & mask[s]))} * 256;
-  };
-  return {at(0, 0, 0), at(0, 0, 1), at(0, 1, 0), at(0, 1, 1), at(1, 0, 0), at(1, 0, 1), at(1, 1, 0), at(1, 1, 1)};
-}
-
-Stencil TrilinearSampler::FetchSplit(int split, std::int32_t i, std::int32_t j, std::int32_t k) const {
-  switch (split) {
-    case 1:
-      return Corners<1>(i, j, k);
-    case 2:
-      return Corners<2>(i, j, k);
-    case 3:
-      return Corners<3>(i, j, k);
-    case 4:
-      return Corners<4>(i, j, k);
-    case 5:
-      return Corners<5>(i, j, k);
-    case 6:
-      return Corners<6>(i, j, k);
-    default:
-      return Corners<7>(i, j, k);
-  }
-}
-
 template <typename R, typename Use>
 [[gnu::always_inline]] inline R TrilinearSampler::WithRowView(std::int32_t i, std::int32_t j, std::int32_t k,
                                                               const Use& use) const {
@@ -222,10 +172,10 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   Cell c;
   if (!Locate(x, y, z, c)) return Background();
   if (phi_ == nullptr) {
-    if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
-    return WithRowView<Sample>(
-        c.i, c.j,
-        c.k, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
+    if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks<4>(c.i, c.j, c.k), c.fx, c.fy, c.fz);
+    return WithRowView<Sample>(c.i, c.j, c.k, [&](const auto& v) __attribute__((always_inline)) {
+      return InterpolateSmooth(v, c.fx, c.fy, c.fz);
+    });
   }
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
@@ -239,7 +189,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
 
 WideStencil TrilinearSampler::CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
   if (phi_ != nullptr) return Copy(FetchWide(i, j, k));
-  if (FaceCell(i, j, k)) return Copy(FetchBricks(i, j, k));
+  if (FaceCell(i, j, k)) return Copy(FetchBricks<4>(i, j, k));
   return WithRowView<WideStencil>(i, j, k, [](const auto& v) { return Copy(v); });
 }
 

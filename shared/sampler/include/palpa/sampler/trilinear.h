@@ -2,9 +2,8 @@
 // RT-safe after construction: no allocation, no exceptions, bounded work (one 8-value or 32-value
 // stencil fetch per sample).
 //
-// Fetching is apart from the math: the 8 corners come from Fetch() and the 32-value wide stencil
-// from a view (WideView on a dense v1 payload; on blob v2's bricks RowView, or BrickView on the
-// grid's faces), so a storage only has to provide those. InterpolatePhi(),
+// Fetching is apart from the math: Fetch() and FetchWide() are the only memory accesses, so a
+// different storage (bricks, a sparse layout) only has to provide those two. InterpolatePhi(),
 // InterpolateSmooth() and InterpolateCellGradient() are pure functions of the stencil and the
 // Q0.16 cell fractions, tested against hand-computed vectors, the float64 trilinear formula and
 // analytic shapes (tests/shared/sampler_test.cc).
@@ -81,14 +80,14 @@ struct WideView {
   }
 };
 
-/// The same values read in place from blob v2's 4³ int16 octants (docs/blob-format.md), for any
-/// cell including those on the grid's faces (RowView is faster but needs the 4 nodes −1..2 of
-/// each axis to be distinct): they span at most two octants per axis, so at most 8. Each node
-/// picks its octant by one bit per axis and adds its octant-local offset; a uniform brick or
-/// octant points at its own index or table entry's low half (its φ, little-endian) with mask 0,
-/// so every value is one branch-free load. Stored Q7.8, returned Q16.16 (·256).
+/// The same values read in place from blob v2's 4³ int16 octants (docs/blob-format.md): N nodes
+/// per axis (2: a cell's corners; 4: the wide stencil, nodes −1..2) span at most two octants per
+/// axis, so at most 8. Each node picks its octant by one bit per axis and adds its octant-local
+/// offset; a uniform brick or octant points at its own index or table entry's low half (its φ,
+/// little-endian) with mask 0, so every value is one branch-free load. Stored Q7.8, returned
+/// Q16.16 (·256).
+template <std::size_t N>
 struct BrickView {
-  static constexpr std::size_t N = 4;         // nodes per axis
   std::array<const std::int16_t*, 8> octant;  // 4·sx + 2·sy + sz
   std::array<std::uint32_t, 8> mask;          // 63 stored, 0 uniform
   // Per axis and node: octant bit (4, 2, 1 or 0) << 16 | local offset (·16, ·4, ·1). The bits and
@@ -99,9 +98,10 @@ struct BrickView {
     const std::uint32_t s = t >> 16;
     return std::int32_t{octant[s][t & mask[s]]} * 256;
   }
-  // The WideStencil interface (corner nodes are 1 and 2 on each axis).
+  // The WideStencil interface (N = 4: corner nodes are 1 and 2 on each axis).
+  static constexpr std::size_t kC = N == 4 ? 1 : 0;
   constexpr std::int32_t Corner(std::size_t n) const {
-    return Get(1 + ((n >> 2) & 1), 1 + ((n >> 1) & 1), 1 + (n & 1));
+    return Get(kC + ((n >> 2) & 1), kC + ((n >> 1) & 1), kC + (n & 1));
   }
   constexpr std::int32_t XOut(std::size_t n) const { return Get((n & 4) ? 3 : 0, 1 + ((n >> 1) & 1), 1 + (n & 1)); }
   constexpr std::int32_t YOut(std::size_t n) const { return Get(1 + ((n >> 2) & 1), (n & 2) ? 3 : 0, 1 + (n & 1)); }
@@ -287,16 +287,48 @@ class TrilinearSampler {
   /// The 8 corner values of cell (i,j,k); requires 0 ≤ i < nx−1 etc. (Locate guarantees it).
   Stencil Fetch(std::int32_t i, std::int32_t j, std::int32_t k) const {
     if (phi_ == nullptr) {
-      // Blob v2. The corners spill into the next octant only along axes where the cell's local
-      // coordinate is 3; the common case, none, is inline: one octant, 8 fixed offsets.
-      const int split = (((i & 3) == 3) << 2) | (((j & 3) == 3) << 1) | ((k & 3) == 3);
-      if (split != 0) return FetchSplit(split, i, j, k);
-      const std::uint32_t* entry = OctantEntry(i >> 2, j >> 2, k >> 2);
-      const std::uint32_t o = *entry;
-      if ((o & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(o & 0xFFFFU)} * 256);
-      const std::int16_t* v =
-          octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes + (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
-      return {v[0] * 256, v[1] * 256, v[4] * 256, v[5] * 256, v[16] * 256, v[17] * 256, v[20] * 256, v[21] * 256};
+      // Cells with all 8 corners in one 8³ brick (7/8 per axis): one index entry, then each
+      // corner's octant from the brick's table (one 32-byte line) and its value.
+      if (((i & 7) != 7) & ((j & 7) != 7) & ((k & 7) != 7)) {
+        const std::uint32_t* slot =
+            index_ + (static_cast<std::ptrdiff_t>(i >> 3) * brick_dims_[1] + (j >> 3)) * brick_dims_[2] + (k >> 3);
+        const std::uint32_t e = *slot;
+        if ((e & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256);
+        const std::uint32_t* table = tables_ + 8 * static_cast<std::size_t>(e);
+        if (((i & 3) != 3) & ((j & 3) != 3) & ((k & 3) != 3)) {  // one octant: fixed offsets
+          const std::uint32_t* entry = table + (((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+          const std::uint32_t o = *entry;
+          if ((o & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(o & 0xFFFFU)} * 256);
+          const std::int16_t* b =
+              octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes + (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+          return {b[0] * 256, b[1] * 256, b[4] * 256, b[5] * 256, b[16] * 256, b[17] * 256, b[20] * 256, b[21] * 256};
+        }
+        // Per axis and corner: octant bit << 16 | octant-local offset, as in BrickView.
+        const std::uint32_t x0 =
+            ((static_cast<std::uint32_t>(i >> 2) & 1) << 18) | static_cast<std::uint32_t>((i & 3) << 4);
+        const std::uint32_t x1 =
+            ((static_cast<std::uint32_t>((i + 1) >> 2) & 1) << 18) | static_cast<std::uint32_t>(((i + 1) & 3) << 4);
+        const std::uint32_t y0 =
+            ((static_cast<std::uint32_t>(j >> 2) & 1) << 17) | static_cast<std::uint32_t>((j & 3) << 2);
+        const std::uint32_t y1 =
+            ((static_cast<std::uint32_t>((j + 1) >> 2) & 1) << 17) | static_cast<std::uint32_t>(((j + 1) & 3) << 2);
+        const std::uint32_t z0 = ((static_cast<std::uint32_t>(k >> 2) & 1) << 16) | static_cast<std::uint32_t>(k & 3);
+        const std::uint32_t z1 =
+            ((static_cast<std::uint32_t>((k + 1) >> 2) & 1) << 16) | static_cast<std::uint32_t>((k + 1) & 3);
+        const auto at = [&](std::uint32_t t) {
+          const std::uint32_t* entry = table + (t >> 16);
+          const std::uint32_t o = *entry;
+          const bool uniform = (o & blob::kSlotEmpty) != 0;
+          const std::int16_t* p = uniform ? reinterpret_cast<const std::int16_t*>(entry)
+                                          : octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes;
+          return std::int32_t{p[t & (uniform ? 0U : 63U)]} * 256;
+        };
+        return {at(x0 + y0 + z0), at(x0 + y0 + z1), at(x0 + y1 + z0), at(x0 + y1 + z1),
+                at(x1 + y0 + z0), at(x1 + y0 + z1), at(x1 + y1 + z0), at(x1 + y1 + z1)};
+      }
+      const BrickView<2> v = FetchBricks<2>(i, j, k);
+      return {v.Get(0, 0, 0), v.Get(0, 0, 1), v.Get(0, 1, 0), v.Get(0, 1, 1),
+              v.Get(1, 0, 0), v.Get(1, 0, 1), v.Get(1, 1, 0), v.Get(1, 1, 1)};
     }
     const std::int32_t* b = phi_ + Offset(i, j, k);
     const std::ptrdiff_t si = stride_i_, sj = dims_[2];
@@ -318,17 +350,23 @@ class TrilinearSampler {
             k + 2 < dims_[2] ? 2 : 1};
   }
 
-  /// Blob v2: FetchWide's 32 values of cell (i,j,k) (nodes i−1..i+2, face-clamped like FetchWide)
-  /// in place in the octants. Same precondition as Fetch.
-  BrickView FetchBricks(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    constexpr std::size_t N = BrickView::N;
-    BrickView v;
+  /// Blob v2: the nodes of cell (i,j,k) in place in the octants; N = 2: its corners (i, i+1 per
+  /// axis), N = 4: FetchWide's 32 values (i−1..i+2, face-clamped like FetchWide). Same
+  /// precondition as Fetch.
+  template <std::size_t N>
+  BrickView<N> FetchBricks(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    BrickView<N> v;
     const std::array<std::int32_t, 3> cell = {i, j, k};
     std::array<std::int32_t, 3> lo{};
     constexpr std::array<std::int32_t, 3> kLocal = {16, 4, 1};
     for (std::size_t a = 0; a < 3; ++a) {
       const std::int32_t c = cell[a];
-      const std::array<std::int32_t, N> node = {c > 0 ? c - 1 : c, c, c + 1, c + 2 < dims_[a] ? c + 2 : c + 1};
+      std::array<std::int32_t, N> node{};
+      if constexpr (N == 2) {
+        node = {c, c + 1};
+      } else {
+        node = {c > 0 ? c - 1 : c, c, c + 1, c + 2 < dims_[a] ? c + 2 : c + 1};
+      }
       lo[a] = node[0] >> 2;
       for (std::size_t m = 0; m < N; ++m) {
         v.node[a][m] = (static_cast<std::uint32_t>((node[m] >> 2) - lo[a]) << (18 - a)) |
@@ -388,26 +426,11 @@ class TrilinearSampler {
     std::int32_t i, j, k, fx, fy, fz;
   };
 
-  // Blob v2: the entry of octant (qx, qy, qz) (octant coordinates): the brick's octant-table
-  // entry, or for a uniform brick its index entry; either is an octant number or kSlotEmpty | φ.
-  const std::uint32_t* OctantEntry(std::int32_t qx, std::int32_t qy, std::int32_t qz) const {
-    const std::uint32_t* slot =
-        index_ + (static_cast<std::ptrdiff_t>(qx >> 1) * brick_dims_[1] + (qy >> 1)) * brick_dims_[2] + (qz >> 1);
-    const std::uint32_t e = *slot;
-    if ((e & blob::kSlotEmpty) != 0) return slot;
-    return tables_ + 8 * static_cast<std::size_t>(e) +
-           static_cast<std::size_t>(((qx & 1) << 2) | ((qy & 1) << 1) | (qz & 1));
-  }
-  // Fetch() on blob v2 for cells whose corners span several octants: `split` has bit 2, 1, 0 set
-  // along x, y, z where the cell's local coordinate is 3.
-  Stencil FetchSplit(int split, std::int32_t i, std::int32_t j, std::int32_t k) const;
-  template <int Split>
-  Stencil Corners(std::int32_t i, std::int32_t j, std::int32_t k) const;
   // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: `use` applied to the cell's
   // RowView (in one of its 16 forms), returning R. At() and CopyWide() read bricks through it.
   template <typename R, typename Use>
   R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const Use& use) const;
-  // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks reads those).
+  // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks<4> reads those).
   bool FaceCell(std::int32_t i, std::int32_t j, std::int32_t k) const {
     // One unsigned compare per axis: interior is 1 ≤ cell ≤ n − 3 (none when n < 4).
     return (static_cast<std::uint32_t>(i - 1) >= static_cast<std::uint32_t>(dims_[0] - 3)) |
