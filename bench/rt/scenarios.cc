@@ -29,7 +29,8 @@ std::unique_ptr<Field> Finish(std::vector<std::byte> bytes, const std::string& n
 }
 
 std::unique_ptr<Field> Analytic(std::uint32_t n, double voxel_m,
-                                const std::function<double(double, double, double)>& sdf, const std::string& name) {
+                                const std::function<double(double, double, double)>& sdf, const std::string& name,
+                                Storage storage) {
   constexpr double kBand = 6;
   std::vector<std::int32_t> phi;
   phi.reserve(std::size_t{n} * n * n);
@@ -43,7 +44,17 @@ std::unique_ptr<Field> Analytic(std::uint32_t n, double voxel_m,
   meta.origin_m = {-half, -half, -half};
   meta.voxel_m = voxel_m;
   meta.band_voxels = static_cast<std::uint32_t>(kBand);
-  return Finish(blob::Encode(meta, phi), name);
+  auto f = Finish(blob::Encode(meta, phi), name);
+  if (storage == Storage::kV2) {  // stored as palpa build's default (bands 6 and 2), view dense
+    blob::BlobMetaV2 m;
+    m.meta = meta;
+    f->stored_bytes = blob::EncodeV2(m, phi);
+    auto view = blob::Verify(f->stored_bytes);
+    if (!view) Die(name + " (v2): " + view.error().what());
+    f->stored_view = *view;
+    f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
+  }
+  return f;
 }
 
 sampler::GridPos ToGrid(const Vec3d& x_vox) {
@@ -92,18 +103,21 @@ std::unique_ptr<Field> LoadField(const std::string& path) {
   return f;
 }
 
-std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox) {
+std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox, Storage storage) {
   const double c = 0.5 * (n - 1);
   return Analytic(
-      n, voxel_m, [=](double i, double j, double k) { return std::hypot(i - c, j - c, k - c) - radius_vox; }, "sphere");
+      n, voxel_m, [=](double i, double j, double k) { return std::hypot(i - c, j - c, k - c) - radius_vox; }, "sphere",
+      storage);
 }
 
-std::unique_ptr<Field> PlateField(std::uint32_t n, double voxel_m, const std::array<double, 3>& nrm, double offset) {
+std::unique_ptr<Field> PlateField(std::uint32_t n, double voxel_m, const std::array<double, 3>& nrm, double offset,
+                                  Storage storage) {
   const double centre = 0.5 * (n - 1);
   const double c = centre * (nrm[0] + nrm[1] + nrm[2]) + offset;
   return Analytic(
       n, voxel_m,
-      [=](double i, double j, double k) { return std::abs(nrm[0] * i + nrm[1] * j + nrm[2] * k - c) - 1.0; }, "plate");
+      [=](double i, double j, double k) { return std::abs(nrm[0] * i + nrm[1] * j + nrm[2] * k - c) - 1.0; }, "plate",
+      storage);
 }
 
 Scenario SurfaceStrokes(const Field& f, const std::string& name, double depth_m, double speed_m_s, int strokes,

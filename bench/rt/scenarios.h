@@ -32,10 +32,14 @@ struct Field {
 
 /// Reads and verifies a .palpa blob; exits with a message naming the file on any error.
 std::unique_ptr<Field> LoadField(const std::string& path);
-/// Sphere of radius `radius_vox` voxels at the centre of an n³ grid (band 6).
-std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox);
-/// Plate |n·x − c| ≤ 1 voxel through the centre of an n³ grid (band 6), normal `normal` (unit).
-std::unique_ptr<Field> PlateField(std::uint32_t n, double voxel_m, const std::array<double, 3>& normal, double offset);
+/// How an analytic field is stored and sampled: a dense v1 blob (band 6), or blob v2 bricks with
+/// palpa build's default bands (6 inside, 2 outside); `view` is the dense form either way.
+enum class Storage { kV1, kV2 };
+/// Sphere of radius `radius_vox` voxels at the centre of an n³ grid.
+std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox, Storage storage = Storage::kV1);
+/// Plate |n·x − c| ≤ 1 voxel through the centre of an n³ grid, normal `normal` (unit).
+std::unique_ptr<Field> PlateField(std::uint32_t n, double voxel_m, const std::array<double, 3>& normal, double offset,
+                                  Storage storage = Storage::kV1);
 
 /// One tick's input and what the tick is for.
 struct Tick {
