@@ -34,6 +34,7 @@
 #include <toml++/toml.h>
 #include <zlib.h>
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "atomic_file.h"
 #include "commands.h"
@@ -74,22 +75,8 @@ std::string Sha256Hex(std::string_view bytes) {
   return hex;
 }
 
-// `s` as a JSON string literal.
-std::string Json(std::string_view s) {
-  std::string out = "\"";
-  for (const char ch : s) {
-    const auto u = static_cast<unsigned char>(ch);
-    if (ch == '"' || ch == '\\') {
-      out += '\\';
-      out += ch;
-    } else if (u < 0x20) {
-      out += fmt::format("\\u{:04x}", u);
-    } else {
-      out += ch;
-    }
-  }
-  return out + "\"";
-}
+// result.json and index.json keep their keys in the order written.
+using Json = nlohmann::ordered_json;
 
 std::vector<std::string> SplitWords(std::string_view s) {
   std::vector<std::string> out;
@@ -730,18 +717,17 @@ std::expected<Replay, std::string> RunReplay(const Context& cx, const Case& c, c
   return r;
 }
 
-// Integer counters from the summary JSON (timing fields are not deterministic and are left out).
-std::map<std::string, std::string> Counters(const std::string& json) {
+// Integer counters from palpad's summary JSON (timing fields are not deterministic and are left
+// out), as the goldens store them: a number's JSON text, or a string's value.
+std::map<std::string, std::string> Counters(const std::string& summary_json) {
   std::map<std::string, std::string> out;
+  const Json summary = Json::parse(summary_json, nullptr, /*allow_exceptions=*/false);
+  if (!summary.is_object()) return out;
   for (const char* key : {"ticks", "contact_ticks", "force_clamps", "device_errors", "dropped_rows", "estop_events",
                           "estop_ticks", "gpio_errors", "end", "fault"}) {
-    const std::string k = std::string("\"") + key + "\": ";
-    const auto p = json.find(k);
-    if (p == std::string::npos) continue;
-    auto v = json.substr(p + k.size());
-    v = v.substr(0, v.find_first_of(",}"));
-    if (!v.empty() && v.front() == '"') v = v.substr(1, v.size() - 2);
-    out[key] = v;
+    const auto it = summary.find(key);
+    if (it == summary.end()) continue;
+    out[key] = it->is_string() ? it->get<std::string>() : it->dump();
   }
   return out;
 }
@@ -845,35 +831,47 @@ std::string Differences(const Context& cx, const Case& c, const Golden& g, const
   return out;
 }
 
-std::string MetricsJson(const Case& c, const Replay& r, const Metrics& m, const Context& cx, bool fast,
-                        const std::string& verdict, const std::string& extra) {
-  std::string j = "{";
-  j += fmt::format("\"case\": \"{}\", \"mode\": \"{}\", \"device\": \"{}\", \"field\": \"{}\", \"trace\": \"{}\", ",
-                   c.name, fast ? "fast" : "realtime", c.device, c.field, c.trace);
-  j += "\"why\": " + Json(c.why) + ", ";
-  j += fmt::format("\"k_n_per_m\": {}, \"max_force_n\": {}, \"rate_hz\": {}, ", cx.k, cx.max_force, cx.rate);
-  j += fmt::format("\"exit_code\": {}, \"wall_s\": {:.3f}, \"ticks\": {}, \"contact_ticks\": {}, ", r.exit_code,
-                   r.wall_s, m.ticks, m.contact_ticks);
-  j += fmt::format("\"max_force_n_seen\": {:.9g}, \"max_slope_n\": {:.9g}, \"slope_limit_n\": {:.9g}, ", m.max_force_n,
-                   m.max_slope_n, m.slope_limit_n);
-  j += fmt::format("\"releases\": {}, \"max_release_n\": {:.9g}, ", m.releases, m.max_release_n);
-  j += fmt::format("\"min_proxy_phi_voxels\": {:.6f}, \"energy_j\": {:.9g}, \"min_passivity_margin_j\": {:.9g}, ",
-                   m.min_proxy_phi_voxels, m.energy_j, m.min_passivity_margin_j);
-  if (m.analytic)
-    j += fmt::format(
-        "\"analytic\": {{\"kind\": \"sphere\", \"centre_m\": [{}, {}, {}], \"radius_m\": {}, \"peak_n\": {:.9g}, "
-        "\"rms_error_n\": {:.9g}, \"rms_error_pct\": {:.6f}, \"rms_angle_deg\": {:.6f}, \"max_angle_deg\": {:.6f}, "
-        "\"angle_ticks\": {}}}, ",
-        (*c.sphere_centre_m)[0], (*c.sphere_centre_m)[1], (*c.sphere_centre_m)[2], c.sphere_radius_m, m.peak_analytic_n,
-        m.rms_error_n, m.rms_error_pct, m.rms_angle_deg, m.max_angle_deg, m.angle_ticks);
-  j += extra;
-  j += "\"failures\": [";
-  std::string fl;
-  for (std::size_t i = 0; i < m.failures.size(); ++i) fl += (i ? ", " : "") + Json(m.failures[i]);
-  j += fl + "], ";
-  j += fmt::format("\"verdict\": \"{}\", \"summary\": {}}}\n", verdict,
-                   r.summary_json.empty() ? std::string("null")
-                                          : r.summary_json.substr(0, r.summary_json.find_last_not_of(" \n") + 1));
+// One case's result.json: the case, the metrics and verdict, `extra` (latency figures) and
+// palpad's own summary.
+Json MetricsJson(const Case& c, const Replay& r, const Metrics& m, const Context& cx, bool fast,
+                 const std::string& verdict, const Json& extra) {
+  Json j = {{"case", c.name},
+            {"mode", fast ? "fast" : "realtime"},
+            {"device", c.device},
+            {"field", c.field},
+            {"trace", c.trace},
+            {"why", c.why},
+            {"k_n_per_m", cx.k},
+            {"max_force_n", cx.max_force},
+            {"rate_hz", cx.rate},
+            {"exit_code", r.exit_code},
+            {"wall_s", r.wall_s},
+            {"ticks", m.ticks},
+            {"contact_ticks", m.contact_ticks},
+            {"max_force_n_seen", m.max_force_n},
+            {"max_slope_n", m.max_slope_n},
+            {"slope_limit_n", m.slope_limit_n},
+            {"releases", m.releases},
+            {"max_release_n", m.max_release_n},
+            {"min_proxy_phi_voxels", m.min_proxy_phi_voxels},
+            {"energy_j", m.energy_j},
+            {"min_passivity_margin_j", m.min_passivity_margin_j}};
+  if (m.analytic) {
+    j["analytic"] = {{"kind", "sphere"},
+                     {"centre_m", *c.sphere_centre_m},
+                     {"radius_m", c.sphere_radius_m},
+                     {"peak_n", m.peak_analytic_n},
+                     {"rms_error_n", m.rms_error_n},
+                     {"rms_error_pct", m.rms_error_pct},
+                     {"rms_angle_deg", m.rms_angle_deg},
+                     {"max_angle_deg", m.max_angle_deg},
+                     {"angle_ticks", m.angle_ticks}};
+  }
+  for (const auto& [key, value] : extra.items()) j[key] = value;
+  j["failures"] = m.failures;
+  j["verdict"] = verdict;
+  Json summary = Json::parse(r.summary_json, nullptr, /*allow_exceptions=*/false);
+  j["summary"] = summary.is_discarded() ? Json(nullptr) : std::move(summary);  // none, or not JSON
   return j;
 }
 
@@ -1110,17 +1108,13 @@ int RunCases(Context& cx, const std::string& action) {
     if (!WriteText(replay->dir / "series.csv", SeriesCsv(replay->ticks, c, sampler, cx.k, cx.max_force), error))
       fmt::print(stderr, "palpa hil: {}\n", error);
     auto fig = [](const Percentiles& p) {
-      return fmt::format(
-          "{{\"count\": {}, \"p50_us\": {:.3f}, \"p99_us\": {:.3f}, \"p999_us\": {:.3f}, \"max_us\": {:.3f}}}", p.count,
-          p.p50, p.p99, p.p999, p.max);
+      return Json{{"count", p.count}, {"p50_us", p.p50}, {"p99_us", p.p99}, {"p999_us", p.p999}, {"max_us", p.max}};
     };
-    const std::string extra = fmt::format(
-        "\"latency\": {{\"wake\": {}, \"compute\": {}, \"total\": {}}}, "
-        "\"estop_ticks\": {}, ",
-        fig(pw), fig(pc), fig(pt), estop_ticks);
-    const std::string json = MetricsJson(c, *replay, m, cx, fast, verdict, extra);
-    if (!WriteText(replay->dir / "result.json", json, error)) fmt::print(stderr, "palpa hil: {}\n", error);
-    index += (index.size() > 1 ? ",\n" : "\n") + json.substr(0, json.size() - 1);
+    const Json extra = {{"latency", {{"wake", fig(pw)}, {"compute", fig(pc)}, {"total", fig(pt)}}},
+                        {"estop_ticks", estop_ticks}};
+    const std::string json = MetricsJson(c, *replay, m, cx, fast, verdict, extra).dump();
+    if (!WriteText(replay->dir / "result.json", json + "\n", error)) fmt::print(stderr, "palpa hil: {}\n", error);
+    index += (index.size() > 1 ? ",\n" : "\n") + json;  // one case a line
   }
   index += "\n]\n";
   std::string error;
