@@ -7,6 +7,7 @@
 #include <memory>
 
 #include <fmt/core.h>
+#include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "palpa/mesh/eval.h"
@@ -16,17 +17,9 @@
 namespace palpa::cli {
 namespace {
 
+// `s` as a JSON string literal (bytes that are not UTF-8 become U+FFFD).
 std::string JsonString(const std::string& s) {
-  std::string out = "\"";
-  for (const char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (static_cast<unsigned char>(c) < 0x20) {
-      out += fmt::format("\\u{:04x}", static_cast<unsigned>(c));
-      continue;
-    }
-    out += c;
-  }
-  return out + "\"";
+  return nlohmann::json(s).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 double Seconds(std::chrono::steady_clock::time_point since) {

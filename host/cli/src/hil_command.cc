@@ -1112,7 +1112,9 @@ int RunCases(Context& cx, const std::string& action) {
     };
     const Json extra = {{"latency", {{"wake", fig(pw)}, {"compute", fig(pc)}, {"total", fig(pt)}}},
                         {"estop_ticks", estop_ticks}};
-    const std::string json = MetricsJson(c, *replay, m, cx, fast, verdict, extra).dump();
+    // (A path or message that is not UTF-8 is written with U+FFFD rather than failing the run.)
+    const std::string json =
+        MetricsJson(c, *replay, m, cx, fast, verdict, extra).dump(-1, ' ', false, Json::error_handler_t::replace);
     if (!WriteText(replay->dir / "result.json", json + "\n", error)) fmt::print(stderr, "palpa hil: {}\n", error);
     index += (index.size() > 1 ? ",\n" : "\n") + json;  // one case a line
   }
