@@ -1,13 +1,13 @@
 // The aarch64 preset's palpad is an aarch64 ELF (scripts/test builds it before running ctest).
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <array>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <string>
-#include <unistd.h>
 
 namespace {
 
@@ -52,9 +52,10 @@ TEST(CrossBuild, PalpadOutputsAreBitIdenticalAcrossArchitectures) {
   const std::string dir = ::testing::TempDir() + "palpa-cross-" + std::to_string(::getpid());
   ASSERT_EQ(Shell("mkdir -p " + dir), 0);
   const std::string field = dir + "/sphere.palpa", trace = dir + "/stroke.csv";
-  ASSERT_EQ(Shell(std::string(PALPA_BIN) + " build " + PALPA_DATA_DIR + "/sphere926.pwn -o " + field + " --cells 64 -q"), 0);
-  ASSERT_EQ(Shell(std::string(PALPA_BIN) + " trace synth --field " + field + " --kind stroke --depth 0.003 -o " + trace +
-                " > /dev/null"),
+  ASSERT_EQ(
+      Shell(std::string(PALPA_BIN) + " build " + PALPA_DATA_DIR + "/sphere926.pwn -o " + field + " --cells 64 -q"), 0);
+  ASSERT_EQ(Shell(std::string(PALPA_BIN) + " trace synth --field " + field + " --kind stroke --depth 0.003 -o " +
+                  trace + " > /dev/null"),
             0);
   const std::string args = " --device sim --field " + field + " --trace " + trace + " --fast --out ";
   ASSERT_EQ(Shell(std::string(PALPA_NATIVE_PALPAD) + args + dir + "/x86.csv > /dev/null"), 0);

@@ -174,9 +174,9 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   if (!Locate(x, y, z, c)) return Background();
   if (phi_ == nullptr) {
     if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks<4>(c.i, c.j, c.k), c.fx, c.fy, c.fz);
-    return WithRowView<Sample>(c.i, c.j, c.k, [&](const auto& v) __attribute__((always_inline)) {
-      return InterpolateSmooth(v, c.fx, c.fy, c.fz);
-    });
+    return WithRowView<Sample>(
+        c.i, c.j,
+        c.k, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
   }
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
