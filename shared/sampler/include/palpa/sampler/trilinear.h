@@ -192,16 +192,20 @@ constexpr Sample InterpolateCellGradient(const Stencil& v, std::int32_t fx, std:
 /// φ (bit-identical to InterpolatePhi of the corners) and the continuous gradient: the central
 /// differences at the 8 corners, interpolated with the same trilinear weights. Derivatives are
 /// carried doubled and halved, rounded, at the end.
+/// How far below Q16.16 a stencil's values are: Wide::kValueShift (RowView: 8), else 0.
+template <typename Wide>
+constexpr int ValueShift() {
+  if constexpr (requires { Wide::kValueShift; }) return Wide::kValueShift;
+  return 0;
+}
+
 /// A stencil whose values are Q16.16 >> kValueShift (RowView: 8, its stored Q7.8) gives the same
 /// bits: with v = u·2^s, (Σw·v + 2^31) >> 32 = (Σw·u + 2^(31−s)) >> (32 − s), and likewise for the
 /// gradient's >> 33.
 template <typename Wide>  // WideStencil, WideView, BrickView or RowView
 [[gnu::always_inline]] inline constexpr Sample InterpolateSmooth(const Wide& s, std::int32_t fx, std::int32_t fy,
                                                                  std::int32_t fz) {
-  constexpr int kShift = [] {
-    if constexpr (requires { Wide::kValueShift; }) return Wide::kValueShift;
-    return 0;
-  }();
+  constexpr int kShift = ValueShift<Wide>();
   const Weights w = TrilinearWeights(fx, fy, fz);
   std::int64_t phi = std::int64_t{1} << (31 - kShift), gx = 0, gy = 0, gz = 0;
   // One z-column (dx, dy) at a time: its corners n0, n0 + 1, their weights, and φ and the three
@@ -414,10 +418,7 @@ class TrilinearSampler {
  private:
   template <typename Wide>
   static WideStencil Copy(const Wide& v) {
-    constexpr int kShift = [] {
-      if constexpr (requires { Wide::kValueShift; }) return Wide::kValueShift;
-      return 0;
-    }();
+    constexpr int kShift = ValueShift<Wide>();
     WideStencil w;
     for (std::size_t n = 0; n < 8; ++n) {
       w.corner[n] = v.Corner(n) * (1 << kShift);
