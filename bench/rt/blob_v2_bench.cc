@@ -115,26 +115,20 @@ bool Prepare(const std::string& path) {
   return true;
 }
 
-template <bool kBricks, bool kStrokes>
-void BM_Phi(benchmark::State& state) {
+// One sample per iteration: φ alone (kGradient false, Phi) or φ and ∇φ (At), on the bricks or the
+// dense copy, at the random points or along the strokes.
+template <bool kGradient, bool kBricks, bool kStrokes>
+void BM_Sample(benchmark::State& state) {
   const Fixture& f = Get();
   const TrilinearSampler s(kBricks ? f.v2 : f.v1);
   const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
   std::size_t n = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(s.Phi(points[n]));
-    n = (n + 1) & 4095;
-  }
-}
-
-template <bool kBricks, bool kStrokes>
-void BM_At(benchmark::State& state) {
-  const Fixture& f = Get();
-  const TrilinearSampler s(kBricks ? f.v2 : f.v1);
-  const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
-  std::size_t n = 0;
-  for (auto _ : state) {
-    benchmark::DoNotOptimize(s.At(points[n]));
+    if constexpr (kGradient) {
+      benchmark::DoNotOptimize(s.At(points[n]));
+    } else {
+      benchmark::DoNotOptimize(s.Phi(points[n]));
+    }
     n = (n + 1) & 4095;
   }
 }
@@ -207,14 +201,14 @@ void BM_LookupHash(benchmark::State& state) {
   state.counters["index_bytes"] = static_cast<double>(cap * 8);
 }
 
-BENCHMARK(BM_Phi<false, false>)->Name("Phi/dense");
-BENCHMARK(BM_Phi<true, false>)->Name("Phi/bricks");
-BENCHMARK(BM_At<false, false>)->Name("At/dense");
-BENCHMARK(BM_At<true, false>)->Name("At/bricks");
-BENCHMARK(BM_Phi<false, true>)->Name("Phi_strokes/dense");
-BENCHMARK(BM_Phi<true, true>)->Name("Phi_strokes/bricks");
-BENCHMARK(BM_At<false, true>)->Name("At_strokes/dense");
-BENCHMARK(BM_At<true, true>)->Name("At_strokes/bricks");
+BENCHMARK(BM_Sample<false, false, false>)->Name("Phi/dense");
+BENCHMARK(BM_Sample<false, true, false>)->Name("Phi/bricks");
+BENCHMARK(BM_Sample<true, false, false>)->Name("At/dense");
+BENCHMARK(BM_Sample<true, true, false>)->Name("At/bricks");
+BENCHMARK(BM_Sample<false, false, true>)->Name("Phi_strokes/dense");
+BENCHMARK(BM_Sample<false, true, true>)->Name("Phi_strokes/bricks");
+BENCHMARK(BM_Sample<true, false, true>)->Name("At_strokes/dense");
+BENCHMARK(BM_Sample<true, true, true>)->Name("At_strokes/bricks");
 BENCHMARK(BM_LookupDenseIndex)->Name("Lookup/dense_index");
 BENCHMARK(BM_LookupHash)->Name("Lookup/hash");
 
