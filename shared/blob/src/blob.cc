@@ -66,6 +66,28 @@ std::expected<void, BlobError> CheckSharedFields(const Header& h) {
   return {};
 }
 
+// What both versions check first, once the version is known: header_size, the length, the buffer's
+// alignment (payloads are read in place as 4-byte words); then the header, copied out, and the
+// fields both versions share.
+template <typename Header>
+std::expected<Header, BlobError> ReadHeader(std::span<const std::byte> blob, std::uint16_t expected_size) {
+  const std::size_t size = blob.size();
+  std::uint16_t header_size = 0;
+  std::memcpy(&header_size, blob.data() + offsetof(Header, header_size), sizeof header_size);
+  if (header_size != expected_size)
+    return Fail("header_size", offsetof(Header, header_size), "%u, expected %u", static_cast<unsigned>(header_size),
+                static_cast<unsigned>(expected_size));
+  if (size < expected_size)
+    return Fail("header", size, "truncated: blob is %zu bytes, header needs %u", size,
+                static_cast<unsigned>(expected_size));
+  if (reinterpret_cast<std::uintptr_t>(blob.data()) % 4 != 0)
+    return Fail("payload", expected_size, "buffer is not 4-byte aligned; cannot read in place");
+  Header h;
+  std::memcpy(&h, blob.data(), sizeof h);
+  if (auto shared = CheckSharedFields(h); !shared) return std::unexpected(shared.error());
+  return h;
+}
+
 }  // namespace
 
 std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc) {
@@ -86,18 +108,9 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
     return Fail("version", offsetof(HeaderV1, version),
                 "%u is not supported (this build reads v1 and v2; rebuild the field with a matching palpa)",
                 static_cast<unsigned>(version));
-  std::uint16_t header_size = 0;
-  std::memcpy(&header_size, blob.data() + offsetof(HeaderV1, header_size), sizeof header_size);
-  if (header_size != kHeaderSize)
-    return Fail("header_size", offsetof(HeaderV1, header_size), "%u, expected %u", static_cast<unsigned>(header_size),
-                static_cast<unsigned>(kHeaderSize));
-  if (size < kHeaderSize) return Fail("header", size, "truncated: blob is %zu bytes, header needs %u", size, 144U);
-  if (reinterpret_cast<std::uintptr_t>(blob.data()) % alignof(std::int32_t) != 0)
-    return Fail("payload", kHeaderSize, "buffer is not 4-byte aligned; cannot read in place");
-
-  HeaderV1 h;
-  std::memcpy(&h, blob.data(), sizeof h);
-  if (auto shared = CheckSharedFields(h); !shared) return std::unexpected(shared.error());
+  auto header = ReadHeader<HeaderV1>(blob, kHeaderSize);
+  if (!header) return std::unexpected(header.error());
+  const HeaderV1& h = *header;
   if (h.value_format != kValueFormatQ16Voxels)
     return Fail("value_format", offsetof(HeaderV1, value_format), "%u is unknown (1 = int32 Q16.16 voxels)",
                 h.value_format);
@@ -227,18 +240,9 @@ std::int32_t EntryPhi(std::uint32_t e) { return static_cast<std::int16_t>(e & 0x
 
 std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob) {
   const std::size_t size = blob.size();
-  std::uint16_t header_size = 0;
-  std::memcpy(&header_size, blob.data() + offsetof(HeaderV2, header_size), sizeof header_size);
-  if (header_size != kHeaderSizeV2)
-    return Fail("header_size", offsetof(HeaderV2, header_size), "%u, expected %u", static_cast<unsigned>(header_size),
-                static_cast<unsigned>(kHeaderSizeV2));
-  if (size < kHeaderSizeV2) return Fail("header", size, "truncated: blob is %zu bytes, header needs %u", size, 168U);
-  if (reinterpret_cast<std::uintptr_t>(blob.data()) % alignof(std::uint32_t) != 0)
-    return Fail("payload", kHeaderSizeV2, "buffer is not 4-byte aligned; cannot read in place");
-
-  HeaderV2 h;
-  std::memcpy(&h, blob.data(), sizeof h);
-  if (auto shared = CheckSharedFields(h); !shared) return std::unexpected(shared.error());
+  auto header = ReadHeader<HeaderV2>(blob, kHeaderSizeV2);
+  if (!header) return std::unexpected(header.error());
+  const HeaderV2& h = *header;
   if (h.value_format != kValueFormatQ7_8Voxels)
     return Fail("value_format", offsetof(HeaderV2, value_format), "%u is unknown (2 = int16 Q7.8 voxels)",
                 h.value_format);
