@@ -88,18 +88,16 @@ bool Project(const Float64Field& f, Vec3d& x, Vec3d& normal) {
 }  // namespace
 
 std::unique_ptr<Field> LoadField(const std::string& path) {
-  auto bytes = blob::ReadFile(path.c_str());
-  if (!bytes) Die(path + ": " + bytes.error().what());
-  auto f = Finish(std::move(*bytes), path);
   auto stored = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
   if (!stored) Die(path + ": " + stored.error().what());
-  if (*stored != f->bytes) {  // v2: the fixed-point tick samples the bricks in place, as palpad
-    f->stored_bytes = std::move(*stored);
-    auto view = blob::Verify(f->stored_bytes);
-    if (!view) Die(path + ": " + view.error().what());
-    f->stored_view = *view;
-    f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
-  }
+  auto view = blob::Verify(*stored);
+  if (!view) Die(path + ": " + view.error().what());
+  if (view->version != blob::kVersion2) return Finish(std::move(*stored), path);
+  // v2: the fixed-point tick samples the bricks in place, as palpad; `view` is the dense form.
+  auto f = Finish(blob::DenseV1(*view), path);
+  f->stored_bytes = std::move(*stored);  // the buffer moves, so `view` still points into it
+  f->stored_view = *view;
+  f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
   return f;
 }
 

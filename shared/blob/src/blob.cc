@@ -191,6 +191,23 @@ std::vector<std::byte> Encode(const BlobMeta& meta, std::span<const std::int32_t
   return out;
 }
 
+std::vector<std::byte> DenseV1(const FieldView& v2) {
+  const std::int32_t band = std::max(v2.band_voxels, v2.band_outside);
+  std::vector<std::int32_t> phi = DenseQ16(v2);
+  for (std::int32_t& x : phi) x = std::clamp(x, -(band << 16), band << 16);
+  BlobMeta meta;
+  for (std::size_t a = 0; a < 3; ++a) meta.dims[a] = static_cast<std::uint32_t>(v2.dims[a]);
+  meta.origin_m = v2.origin_m;
+  meta.voxel_m = v2.voxel_m;
+  meta.band_voxels = static_cast<std::uint32_t>(band);
+  meta.method = v2.method;
+  meta.point_count = v2.point_count;
+  meta.build_time_ns = v2.build_time_ns;
+  meta.fit_scale = v2.fit_scale;
+  meta.fit_offset_m = v2.fit_offset_m;
+  return Encode(meta, phi);
+}
+
 std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load) {
   std::FILE* f = std::fopen(path, "rb");
   if (f == nullptr) return Fail("file", 0, "cannot open %s: %s", path, std::strerror(errno));
@@ -210,21 +227,7 @@ std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load
   if (version != kVersion2) return data;
   const auto view = Verify(data);
   if (!view) return std::unexpected(view.error());
-  // The dense v1 equivalent: the same node values, clamped to a symmetric band (v1's rule).
-  const std::int32_t band = std::max(view->band_voxels, view->band_outside);
-  std::vector<std::int32_t> phi = DenseQ16(*view);
-  for (std::int32_t& x : phi) x = std::clamp(x, -(band << 16), band << 16);
-  BlobMeta meta;
-  for (std::size_t a = 0; a < 3; ++a) meta.dims[a] = static_cast<std::uint32_t>(view->dims[a]);
-  meta.origin_m = view->origin_m;
-  meta.voxel_m = view->voxel_m;
-  meta.band_voxels = static_cast<std::uint32_t>(band);
-  meta.method = view->method;
-  meta.point_count = view->point_count;
-  meta.build_time_ns = view->build_time_ns;
-  meta.fit_scale = view->fit_scale;
-  meta.fit_offset_m = view->fit_offset_m;
-  return Encode(meta, phi);
+  return DenseV1(*view);
 }
 
 }  // namespace palpa::blob

@@ -249,11 +249,14 @@ struct BlobMetaV2 {
 /// excluded). Non-RT.
 [[nodiscard]] std::vector<std::int32_t> DenseQ16(const FieldView& view);
 
+/// The dense v1 blob equivalent to a verified v2 view: the same node values, clamped to a symmetric
+/// band ±max(band_inside, band_outside) (v1's rule), and the same metadata. Non-RT.
+[[nodiscard]] std::vector<std::byte> DenseV1(const FieldView& v2);
+
 /// How ReadFile hands a v2 blob back.
 enum class Load {
   kAsStored,  ///< the file's bytes (palpad, palpa info: the blob is used in place)
-  kDense,     ///< a v2 blob is verified, then re-encoded as the equivalent dense v1 blob (values
-              ///< clamped to ±max(band_inside, band_outside)) for the host tools that index φ
+  kDense,     ///< a v2 blob is verified, then re-encoded by DenseV1 for the host tools that index φ
 };
 
 /// Reads a whole file into a buffer suitable for Verify (non-RT). Errors name the file; with
