@@ -83,17 +83,23 @@ class Float64Field {
       gy[n] = (n & 2) ? V(b[o - sj + yp]) - v[n - 2] : v[n + 2] - V(b[o + ym]);
       gz[n] = (n & 1) ? V(b[o - 1 + zp]) - v[n - 1] : v[n + 1] - V(b[o + zm]);
     }
-    s.phi = Tri(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], c.f);
-    s.grad = {0.5 * Tri(gx[0], gx[1], gx[2], gx[3], gx[4], gx[5], gx[6], gx[7], c.f),
-              0.5 * Tri(gy[0], gy[1], gy[2], gy[3], gy[4], gy[5], gy[6], gy[7], c.f),
-              0.5 * Tri(gz[0], gz[1], gz[2], gz[3], gz[4], gz[5], gz[6], gz[7], c.f)};
-    return s;
+    return Interpolate(v, gx, gy, gz, c);
   }
 
   struct Cell {
     std::array<std::int32_t, 3> i;
     Vec3d f;
   };
+  // φ and the gradient at fractions c.f from the corner values and the doubled central differences.
+  static Float64Sample Interpolate(const double (&v)[8], const double (&gx)[8], const double (&gy)[8],
+                                   const double (&gz)[8], const Cell& c) {
+    Float64Sample s;
+    s.phi = Tri(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], c.f);
+    s.grad = {0.5 * Tri(gx[0], gx[1], gx[2], gx[3], gx[4], gx[5], gx[6], gx[7], c.f),
+              0.5 * Tri(gy[0], gy[1], gy[2], gy[3], gy[4], gy[5], gy[6], gy[7], c.f),
+              0.5 * Tri(gz[0], gz[1], gz[2], gz[3], gz[4], gz[5], gz[6], gz[7], c.f)};
+    return s;
+  }
   // φ and the gradient from the 32 values of a wide stencil (blob v2), as AtInline's dense path.
   static Float64Sample FromWide(const sampler::WideStencil& w, const Cell& c) {
     double v[8], gx[8], gy[8], gz[8];
@@ -103,12 +109,7 @@ class Float64Field {
       gy[n] = (n & 2) ? V(w.y_out[n]) - v[n - 2] : v[n + 2] - V(w.y_out[n]);
       gz[n] = (n & 1) ? V(w.z_out[n]) - v[n - 1] : v[n + 1] - V(w.z_out[n]);
     }
-    Float64Sample s;
-    s.phi = Tri(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], c.f);
-    s.grad = {0.5 * Tri(gx[0], gx[1], gx[2], gx[3], gx[4], gx[5], gx[6], gx[7], c.f),
-              0.5 * Tri(gy[0], gy[1], gy[2], gy[3], gy[4], gy[5], gy[6], gy[7], c.f),
-              0.5 * Tri(gz[0], gz[1], gz[2], gz[3], gz[4], gz[5], gz[6], gz[7], c.f)};
-    return s;
+    return Interpolate(v, gx, gy, gz, c);
   }
   static double V(std::int32_t raw) { return raw * (1.0 / 65536.0); }
   static double Lerp(double a, double b, double t) { return a + (b - a) * t; }
