@@ -1,5 +1,9 @@
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -131,6 +135,174 @@ TEST(ReadPoints, FewerThanFourPoints) {
 
   const TempFile empty("empty.xyz", "# nothing\n");
   EXPECT_FALSE(ReadPoints(empty.path()).has_value());
+}
+
+// PLY (docs/input-formats.md). The expected values are the ones written into each file.
+
+constexpr char kAsciiPly[] =
+    "ply\n"
+    "format ascii 1.0\n"
+    "comment written by hand\n"
+    "element vertex 4\n"
+    "property double x\n"
+    "property double y\n"
+    "property float z\n"
+    "property uchar red\n"
+    "property float nx\n"
+    "property float ny\n"
+    "property int nz\n"
+    "element face 1\n"
+    "property list uchar int vertex_indices\n"
+    "end_header\n"
+    "0 0 0 255 1 0 0\n"
+    "1 0 0 7 0 2 0\n"
+    "0 1 0.5 9 0 0 3\n"
+    "0 0 1 0 -1 0 0\n"
+    "3 0 1 2\n";
+
+TEST(ReadPly, AsciiWithExtraPropertiesAndFaces) {
+  const TempFile file("points.PLY", kAsciiPly);
+  const auto points = ReadPoints(file.path());
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  ASSERT_EQ(points->positions.size(), 4u);
+  EXPECT_EQ(points->positions[2], Eigen::Vector3d(0, 1, 0.5));
+  EXPECT_EQ(points->normals[1], Eigen::Vector3d(0, 1, 0));  // (0, 2, 0) normalised
+  EXPECT_EQ(points->normals[2], Eigen::Vector3d(0, 0, 1));  // int nz = 3
+  EXPECT_EQ(points->normals[3], Eigen::Vector3d(-1, 0, 0));
+}
+
+// Appends `v` as PLY type T in the given byte order.
+template <typename T>
+void Put(std::string& out, T v, bool big) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  const bool swap = big == (std::endian::native == std::endian::little);
+  for (std::size_t i = 0; i < sizeof(T); ++i) out.push_back(static_cast<char>(b[swap ? sizeof(T) - 1 - i : i]));
+}
+
+// A binary PLY of `points` (x y z float, a ushort, nx ny nz double), after an element that
+// comes first and holds a list (skipped), and followed by faces (never read). Header bytes first.
+std::string BinaryPly(const std::vector<std::array<double, 6>>& points, bool big, std::size_t& header_bytes) {
+  std::string out = std::string("ply\nformat ") + (big ? "binary_big_endian" : "binary_little_endian") +
+                    " 1.0\n"
+                    "element material 2\n"
+                    "property list uchar short ids\n"
+                    "property int8 kind\n"
+                    "element vertex " +
+                    std::to_string(points.size()) +
+                    "\n"
+                    "property float32 x\nproperty float32 y\nproperty float32 z\n"
+                    "property ushort quality\n"
+                    "property float64 nx\nproperty float64 ny\nproperty float64 nz\n"
+                    "element face 1\nproperty list uchar int vertex_indices\n"
+                    "end_header\n";
+  header_bytes = out.size();
+  Put<std::uint8_t>(out, 2, big), Put<std::int16_t>(out, -5, big), Put<std::int16_t>(out, 300, big);
+  Put<std::int8_t>(out, -1, big);
+  Put<std::uint8_t>(out, 0, big), Put<std::int8_t>(out, 4, big);
+  for (const auto& p : points) {
+    for (std::size_t a = 0; a < 3; ++a) Put<float>(out, static_cast<float>(p[a]), big);
+    Put<std::uint16_t>(out, 65535, big);
+    for (std::size_t a = 3; a < 6; ++a) Put<double>(out, p[a], big);
+  }
+  Put<std::uint8_t>(out, 3, big);
+  for (int v = 0; v < 3; ++v) Put<std::int32_t>(out, v, big);
+  return out;
+}
+
+const std::vector<std::array<double, 6>> kBinaryPoints = {
+    {0, 0, 0, 1, 0, 0}, {1.5, 0, 0, 0, 2, 0}, {0, -1, 0, 0, 0, 3}, {0, 0, 1, -1, 0, 0}, {0.25, 0.5, 2, 1, 1, 0}};
+
+TEST(ReadPly, BinaryLittleAndBigEndianReadTheSamePoints) {
+  for (const bool big : {false, true}) {
+    std::size_t header = 0;
+    const TempFile file(big ? "big.ply" : "little.ply", BinaryPly(kBinaryPoints, big, header));
+    const auto points = ReadPoints(file.path());
+    ASSERT_TRUE(points.has_value()) << points.error().message;
+    ASSERT_EQ(points->positions.size(), kBinaryPoints.size());
+    for (std::size_t i = 0; i < kBinaryPoints.size(); ++i) {
+      const auto& p = kBinaryPoints[i];
+      EXPECT_EQ(points->positions[i], Eigen::Vector3d(p[0], p[1], p[2])) << big << " " << i;
+      EXPECT_TRUE(points->normals[i].isApprox(Eigen::Vector3d(p[3], p[4], p[5]).normalized(), 1e-15)) << i;
+    }
+  }
+}
+
+TEST(ReadPly, TruncatedBinaryNamesTheByte) {
+  std::size_t header = 0;
+  std::string bytes = BinaryPly(kBinaryPoints, false, header);
+  // Materials: 1 + 4 + 1 and 1 + 0 + 1 bytes (8); a vertex 12 + 2 + 24 = 38 bytes. Cut vertex 3
+  // inside its nz (byte 30 of the vertex): 2 of its 8 bytes are there.
+  const std::size_t vertex3 = header + 8 + 3 * 38;
+  bytes.resize(vertex3 + 32);
+  const TempFile file("cut.ply", bytes);
+  const auto points = ReadPoints(file.path());
+  ASSERT_FALSE(points.has_value());
+  EXPECT_EQ(points.error().message, file.path().string() + ": byte " + std::to_string(vertex3 + 30) +
+                                        ": the file ends inside vertex 3 of 5 'nz' (2 of 8 bytes there)");
+}
+
+TEST(ReadPly, BadPointNamesTheVertex) {
+  auto zero = kBinaryPoints;
+  zero[2] = {0, 0, 0, 0, 0, 0};
+  std::size_t header = 0;
+  const TempFile file("zero.ply", BinaryPly(zero, true, header));
+  const auto points = ReadPoints(file.path());
+  ASSERT_FALSE(points.has_value());
+  EXPECT_EQ(points.error().message, file.path().string() + ": byte " + std::to_string(header + 8 + 2 * 38) +
+                                        " (vertex 2): normal has zero length");
+
+  std::string ascii = kAsciiPly;
+  ascii.replace(ascii.find("0 1 0.5"), 7, "0 nan 0.5");
+  const TempFile nan("nan.ply", ascii);
+  const auto b = ReadPoints(nan.path());
+  ASSERT_FALSE(b.has_value());
+  EXPECT_EQ(b.error().message, nan.path().string() + ":17 (vertex 2): position is not finite");
+}
+
+TEST(ReadPly, BadHeadersNameTheLine) {
+  const auto error_of = [](std::string_view name, std::string text) {
+    const TempFile file(name, text);
+    const auto points = ReadPoints(file.path());
+    EXPECT_FALSE(points.has_value()) << name;
+    return points ? std::string() : points.error().message.substr(file.path().string().size());
+  };
+  std::string text = kAsciiPly;
+  EXPECT_EQ(error_of("magic.ply", "PLY\n" + text.substr(4)), ":1: not a PLY file (the first line is not 'ply')");
+  EXPECT_EQ(error_of("format.ply", "ply\nformat binary 1.0\n" + text.substr(21)),
+            ":2: unknown format 'binary' (ascii, binary_little_endian or binary_big_endian)");
+  std::string no_nz = text;
+  no_nz.replace(no_nz.find("property int nz"), 15, "property int w");
+  EXPECT_EQ(error_of("nz.ply", no_nz), ": the vertex element has no scalar nz (oriented points need x y z nx ny nz)");
+  std::string bad_type = text;
+  bad_type.replace(bad_type.find("uchar red"), 5, "byte");
+  EXPECT_EQ(error_of("type.ply", bad_type), ":8: unknown property type 'byte'");
+  EXPECT_EQ(error_of("open.ply", text.substr(0, text.find("end_header"))), ": the header has no 'end_header' line");
+  std::string word = text;
+  word.replace(word.find("1 0 0 7"), 7, "1 0 0 x");
+  EXPECT_EQ(error_of("word.ply", word), ":16: 'x' is not a valid integer for vertex 1 of 4 'red'");
+  EXPECT_EQ(error_of("short.ply", text.substr(0, text.find("0 0 1 0 -1"))),
+            ":18: the file ends before vertex 3 of 4 'x'");
+}
+
+TEST(ReadPly, BundledKittenAsBinaryPlyEqualsTheXyz) {
+  const auto xyz = ReadPoints(DataFile("kitten.xyz"));
+  ASSERT_TRUE(xyz.has_value()) << xyz.error().message;
+  std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(xyz->positions.size()) +
+                    "\nproperty double x\nproperty double y\nproperty double z\n"
+                    "property double nx\nproperty double ny\nproperty double nz\nend_header\n";
+  for (std::size_t i = 0; i < xyz->positions.size(); ++i) {
+    for (int a = 0; a < 3; ++a) Put<double>(ply, xyz->positions[i][a], false);
+    for (int a = 0; a < 3; ++a) Put<double>(ply, xyz->normals[i][a], false);
+  }
+  const TempFile file("kitten.ply", ply);
+  const auto read = ReadPoints(file.path());
+  ASSERT_TRUE(read.has_value()) << read.error().message;
+  EXPECT_EQ(read->positions, xyz->positions);
+  ASSERT_EQ(read->normals.size(), xyz->normals.size());
+  for (std::size_t i = 0; i < read->normals.size(); ++i) {
+    EXPECT_EQ(read->normals[i], xyz->normals[i] / xyz->normals[i].norm()) << i;  // normalised once more
+  }
 }
 
 TEST(Transform, FitsLongestSideAndCentres) {

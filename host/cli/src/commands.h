@@ -16,7 +16,7 @@ inline constexpr int kExitIo = 1;
 inline constexpr int kExitBadInput = 2;
 
 struct BuildArgs {
-  std::string points;                ///< .xyz / .pwn
+  std::string points;                ///< .xyz / .pwn / .ply
   std::string output;                ///< FIELD.palpa
   double fit_m = 0.06;               ///< longest bbox side → this many metres, centred at origin
   std::optional<double> scale;       ///< instead of fit: device = scale·model + offset

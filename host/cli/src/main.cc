@@ -15,7 +15,10 @@ int main(int argc, char** argv) {
 
   BuildArgs b;
   auto* build = app.add_subcommand("build", "Build a signed distance field blob from oriented points");
-  build->add_option("points", b.points, "Oriented points: .xyz or .pwn (x y z nx ny nz per line)")->required();
+  build
+      ->add_option("points", b.points,
+                   "Oriented points: .xyz or .pwn (x y z nx ny nz per line), or .ply (vertex x y z nx ny nz)")
+      ->required();
   build->add_option("-o,--output", b.output, "Output blob (FIELD.palpa), written atomically")->required();
   auto* fit =
       build->add_option("--fit", b.fit_m, "Longest bounding-box side in metres, centred at the workspace origin")

@@ -1,5 +1,7 @@
 #include "palpa/field/point_io.h"
 
+#include "ply.h"
+
 #include <fmt/format.h>
 #include <array>
 #include <cctype>
@@ -9,6 +11,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -34,14 +37,32 @@ bool ParseNumber(std::string_view token, double& value) {
   return ec == std::errc() && ptr == end;
 }
 
+std::optional<std::string> AddPoint(PointSet& points, const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+  if (!p.allFinite()) return "position is not finite";
+  const double length = n.norm();
+  if (!n.allFinite() || !std::isfinite(length)) return "normal is not finite";
+  if (!(length > 0.0)) return "normal has zero length";
+  points.positions.push_back(p);
+  points.normals.push_back(n / length);
+  return std::nullopt;
+}
+
+std::expected<PointSet, Error> AtLeastFour(const std::string& name, PointSet points) {
+  if (points.positions.size() < kMinPoints) {
+    return std::unexpected(
+        Error{fmt::format("{}: {} points; at least {} are needed", name, points.positions.size(), kMinPoints)});
+  }
+  return points;
+}
+
 }  // namespace
 
 std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
   const std::string name = path.string();
   const std::string ext = Lower(path.extension().string());
-  if (ext != ".xyz" && ext != ".pwn") {
-    return std::unexpected(
-        Error{fmt::format("{}: unknown extension '{}' (expected .xyz or .pwn)", name, path.extension().string())});
+  if (ext != ".xyz" && ext != ".pwn" && ext != ".ply") {
+    return std::unexpected(Error{
+        fmt::format("{}: unknown extension '{}' (expected .xyz, .pwn or .ply)", name, path.extension().string())});
   }
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) {
@@ -54,6 +75,11 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
   const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
   if (in.bad()) {
     return std::unexpected(Error{fmt::format("{}: read error", name)});
+  }
+  if (ext == ".ply") {
+    auto points = detail::ReadPly(name, text, AddPoint);
+    if (!points) return std::unexpected(points.error());
+    return AtLeastFour(name, std::move(*points));
   }
 
   PointSet points;
@@ -92,24 +118,11 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
     const Eigen::Vector3d n(values[3], values[4], values[5]);
-    if (!p.allFinite()) {
-      return std::unexpected(Error{fmt::format("{}:{}: position is not finite", name, line_number)});
+    if (auto bad = AddPoint(points, p, n)) {
+      return std::unexpected(Error{fmt::format("{}:{}: {}", name, line_number, *bad)});
     }
-    const double length = n.norm();
-    if (!n.allFinite() || !std::isfinite(length)) {
-      return std::unexpected(Error{fmt::format("{}:{}: normal is not finite", name, line_number)});
-    }
-    if (!(length > 0.0)) {
-      return std::unexpected(Error{fmt::format("{}:{}: normal has zero length", name, line_number)});
-    }
-    points.positions.push_back(p);
-    points.normals.push_back(n / length);
   }
-  if (points.positions.size() < kMinPoints) {
-    return std::unexpected(
-        Error{fmt::format("{}: {} points; at least {} are needed", name, points.positions.size(), kMinPoints)});
-  }
-  return points;
+  return AtLeastFour(name, std::move(points));
 }
 
 }  // namespace palpa::field

@@ -18,14 +18,22 @@ struct PointSet {
   std::vector<Eigen::Vector3d> normals;
 };
 
-// Reads an ASCII .xyz or .pwn file (extension case-insensitive): one point per line as six
-// whitespace-separated numbers `x y z nx ny nz`. `#` starts a comment; blank lines and trailing
-// whitespace are allowed. Normals are normalised to unit length.
+// Reads oriented points, by extension (case-insensitive):
+//   .xyz, .pwn  ASCII, one point per line as six whitespace-separated numbers `x y z nx ny nz`.
+//               `#` starts a comment; blank lines and trailing whitespace are allowed.
+//   .ply        PLY 1.0 (ascii, binary_little_endian or binary_big_endian; docs/input-formats.md):
+//               the `vertex` element's scalar properties x y z nx ny nz, of any PLY number type;
+//               other properties and elements (colours, faces, lists) are skipped.
+// Normals are normalised to unit length. Nothing is returned unless the whole file is good.
 //
-// Errors (message starts with the file name, plus ":LINE" for a line error):
+// Errors (message starts with the file name, plus ":LINE" for a line error, or ": byte N" in a
+// binary PLY body):
 //   unknown extension; missing or unreadable file; a line without exactly six numbers
 //   ("data/x.xyz:17: expected 6 numbers, found 5"); a token that is not a number; non-finite
-//   position; zero-length or non-finite normal; fewer than 4 points.
+//   position; zero-length or non-finite normal; fewer than 4 points. PLY also: a bad or
+//   unterminated header (its line), no vertex element or a missing x … nz property, a body that
+//   ends early ("scan.ply: byte 1234: the file ends inside vertex 77 of 100 'nz' (2 of 4 bytes
+//   there)"), and a bad point, named by its vertex number.
 std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path);
 
 }  // namespace palpa::field
