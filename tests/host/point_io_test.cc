@@ -127,6 +127,18 @@ TEST(ReadPoints, ZeroNormal) {
   EXPECT_THAT(points.error().message, HasSubstr("zero"));
 }
 
+TEST(ReadPoints, TinyAndHugeNormalsComeOutUnitLength) {
+  // |n|² of 1e-160 per axis is subnormal (bits lost) and of 1e200 overflows: both were wrong
+  // before the reader scaled by the largest component (found by fuzz/ply_fuzz.cc).
+  const TempFile file("extreme.xyz", std::string(kFourPoints) + "0 0 0 1e-160 1e-160 1e-160\n0 0 0 1e200 0 -1e200\n");
+  const auto points = ReadPoints(file.path());
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  ASSERT_EQ(points->normals.size(), 6u);
+  const double r3 = 1 / std::sqrt(3.0), r2 = 1 / std::sqrt(2.0);
+  EXPECT_TRUE(points->normals[4].isApprox(Eigen::Vector3d(r3, r3, r3), 1e-15)) << points->normals[4].transpose();
+  EXPECT_TRUE(points->normals[5].isApprox(Eigen::Vector3d(r2, 0, -r2), 1e-15)) << points->normals[5].transpose();
+}
+
 TEST(ReadPoints, FewerThanFourPoints) {
   const TempFile file("three.xyz", "0 0 0 1 0 0\n1 0 0 1 0 0\n0 1 0 1 0 0\n");
   const auto points = ReadPoints(file.path());

@@ -1,14 +1,12 @@
 // Internal: the PLY reader behind ReadPoints (palpa/field/point_io.h).
 #pragma once
 
-#include <expected>
 #include <optional>
 #include <string>
 #include <string_view>
 
 #include <Eigen/Core>
 
-#include "palpa/field/error.h"
 #include "palpa/field/point_io.h"
 
 namespace palpa::field::detail {
@@ -17,7 +15,15 @@ namespace palpa::field::detail {
 using AddPoint = std::optional<std::string> (*)(PointSet& points, const Eigen::Vector3d& position,
                                                 const Eigen::Vector3d& normal);
 
-/// Parses the PLY file `name` whose bytes are `text`; see ReadPoints for the contract.
-std::expected<PointSet, Error> ReadPly(const std::string& name, std::string_view text, const AddPoint& add);
+/// ReadPoints' rules for one point: a finite position, a finite non-zero normal, which is
+/// normalised. Appends it, or says what is wrong. (ply.cc)
+std::optional<std::string> AddOrientedPoint(PointSet& points, const Eigen::Vector3d& position,
+                                            const Eigen::Vector3d& normal);
+
+/// Parses the PLY file `name` whose bytes are `text` into `points` (appended); see ReadPoints for
+/// the contract. Returns the error, or nothing. (Not std::expected<PointSet>: the fuzzer's clang
+/// 14 cannot destroy libstdc++ 12's expected of a non-trivial type.)
+std::optional<std::string> ReadPly(const std::string& name, std::string_view text, const AddPoint& add,
+                                   PointSet& points);
 
 }  // namespace palpa::field::detail

@@ -37,16 +37,6 @@ bool ParseNumber(std::string_view token, double& value) {
   return ec == std::errc() && ptr == end;
 }
 
-std::optional<std::string> AddPoint(PointSet& points, const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
-  if (!p.allFinite()) return "position is not finite";
-  const double length = n.norm();
-  if (!n.allFinite() || !std::isfinite(length)) return "normal is not finite";
-  if (!(length > 0.0)) return "normal has zero length";
-  points.positions.push_back(p);
-  points.normals.push_back(n / length);
-  return std::nullopt;
-}
-
 std::expected<PointSet, Error> AtLeastFour(const std::string& name, PointSet points) {
   if (points.positions.size() < kMinPoints) {
     return std::unexpected(
@@ -77,9 +67,10 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
     return std::unexpected(Error{fmt::format("{}: read error", name)});
   }
   if (ext == ".ply") {
-    auto points = detail::ReadPly(name, text, AddPoint);
-    if (!points) return std::unexpected(points.error());
-    return AtLeastFour(name, std::move(*points));
+    PointSet points;
+    if (auto error = detail::ReadPly(name, text, detail::AddOrientedPoint, points))
+      return std::unexpected(Error{std::move(*error)});
+    return AtLeastFour(name, std::move(points));
   }
 
   PointSet points;
@@ -118,7 +109,7 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
     const Eigen::Vector3d n(values[3], values[4], values[5]);
-    if (auto bad = AddPoint(points, p, n)) {
+    if (auto bad = detail::AddOrientedPoint(points, p, n)) {
       return std::unexpected(Error{fmt::format("{}:{}: {}", name, line_number, *bad)});
     }
   }
