@@ -15,6 +15,7 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
       last_{static_cast<std::uint32_t>(field.dims[0] - 1) << 16, static_cast<std::uint32_t>(field.dims[1] - 1) << 16,
             static_cast<std::uint32_t>(field.dims[2] - 1) << 16},
       stride_i_(static_cast<std::ptrdiff_t>(field.dims[1]) * field.dims[2]),
+      slot_stride_i_(static_cast<std::ptrdiff_t>(field.brick_dims[1]) * field.brick_dims[2]),
       background_((field.phi != nullptr ? field.band_voxels : field.band_outside) << 16) {
   // One pass over every cell through Fetch (the storage's only access path). Skipped: cells whose
   // corners are all equal (free space and deep inside, most of the grid: zero gradient) and cells
@@ -185,8 +186,54 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
 
-// Flattened: the storage's fetch and its octant look-ups are inlined here, where the loop calls.
+// Blob v2, a cell that spills along two or three axes (10/64 of cells): out of line, so that Phi's
+// common paths do not save its registers.
+[[gnu::noinline]] std::int32_t TrilinearSampler::PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k,
+                                                              const std::int32_t* f) const {
+  switch (spill) {
+    case 3:
+      return InterpolatePhi<8>(SpillStencil<3>(i, j, k), f[0], f[1], f[2]);
+    case 5:
+      return InterpolatePhi<8>(SpillStencil<5>(i, j, k), f[0], f[1], f[2]);
+    case 6:
+      return InterpolatePhi<8>(SpillStencil<6>(i, j, k), f[0], f[1], f[2]);
+    default:
+      return InterpolatePhi<8>(SpillStencil<7>(i, j, k), f[0], f[1], f[2]);
+  }
+}
+
+// Blob v2. Each path interpolates its own corners (none merged into a stencil in memory first).
+// A cell inside one octant (27/64 of cells): one index entry, one table entry, eight fixed offsets;
+// a uniform brick or octant is its value (the weights sum to exactly 2^32, so eight equal values
+// interpolate to that value). Spilling along one axis (27/64) inline, along more out of line.
+[[gnu::noinline]] std::int32_t TrilinearSampler::PhiStored(std::int32_t x, std::int32_t y, std::int32_t z) const {
+  Cell c;
+  if (!Locate(x, y, z, c)) return background_;
+  const std::int32_t i = c.i, j = c.j, k = c.k;
+  switch (Spill(i, j, k)) {
+    case 0: {
+      const std::uint32_t* entry = OwnEntry(i, j, k);
+      if ((*entry & blob::kSlotEmpty) != 0) return std::int32_t{static_cast<std::int16_t>(*entry & 0xFFFFU)} * 256;
+      const std::int16_t* b = OwnCorner(*entry, i, j, k);
+      return InterpolatePhi<8>({b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]}, c.fx, c.fy, c.fz);
+    }
+    case 4:
+      return InterpolatePhi<8>(SpillStencil<4>(i, j, k), c.fx, c.fy, c.fz);
+    case 2:
+      return InterpolatePhi<8>(SpillStencil<2>(i, j, k), c.fx, c.fy, c.fz);
+    case 1:
+      return InterpolatePhi<8>(SpillStencil<1>(i, j, k), c.fx, c.fy, c.fz);
+    default: {
+      const std::int32_t f[3] = {c.fx, c.fy, c.fz};
+      return PhiSpillMany(Spill(i, j, k), i, j, k, f);
+    }
+  }
+}
+
+// Dense (v1): the corners at fixed strides; blob v2 in a function of its own (a tail call), so that
+// neither saves the other's registers.
 [[gnu::flatten]] std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t z) const {
+  if (phi_ == nullptr) return PhiStored(x, y, z);
   Cell c;
   if (!Locate(x, y, z, c)) return background_;
   return InterpolatePhi(Fetch(c.i, c.j, c.k), c.fx, c.fy, c.fz);

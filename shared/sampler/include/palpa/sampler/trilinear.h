@@ -165,11 +165,14 @@ constexpr Weights TrilinearWeights(std::int32_t fx, std::int32_t fy, std::int32_
 /// with the weights above, rounded to nearest once. Within 1 LSB of the exact trilinear value.
 /// Part of the bit-exact contract, and the same arithmetic as the φ of InterpolateSmooth (so
 /// Phi() and At() agree to the bit).
+/// kShift: the values are Q16.16 >> kShift (blob v2's stored Q7.8: 8), with the same result bits:
+/// with v = u·2^s, (Σw·v + 2^31) >> 32 = (Σw·u + 2^(31−s)) >> (32 − s).
+template <int kShift = 0>
 constexpr std::int32_t InterpolatePhi(const Stencil& v, std::int32_t fx, std::int32_t fy, std::int32_t fz) {
   const Weights w = TrilinearWeights(fx, fy, fz);
-  std::int64_t phi = std::int64_t{1} << 31;
+  std::int64_t phi = std::int64_t{1} << (31 - kShift);
   for (std::size_t c = 0; c < 4; ++c) phi += w.z0[c] * v[2 * c] + (w.xy[c] - w.z0[c]) * v[2 * c + 1];
-  return static_cast<std::int32_t>(phi >> 32);
+  return static_cast<std::int32_t>(phi >> (32 - kShift));
 }
 
 /// φ and the analytic gradient of this cell's trilinear polynomial (discontinuous across cell
@@ -291,58 +294,43 @@ class TrilinearSampler {
   /// The 8 corner values of cell (i,j,k); requires 0 ≤ i < nx−1 etc. (Locate guarantees it).
   Stencil Fetch(std::int32_t i, std::int32_t j, std::int32_t k) const {
     if (phi_ == nullptr) {
-      // The corners spill into the next octant along axes where the cell's local coordinate is 3.
-      // Spilling along one axis (42 % of cells): the two octants, each looked up once.
-      const int spill = (((i & 3) == 3) << 2) | (((j & 3) == 3) << 1) | ((k & 3) == 3);
-      if (spill == 4) return SpillCorners<4>(i, j, k);
-      if (spill == 2) return SpillCorners<2>(i, j, k);
-      if (spill == 1) return SpillCorners<1>(i, j, k);
-      // Cells with all 8 corners in one 8³ brick (7/8 per axis): one index entry, then each
-      // corner's octant from the brick's table (one 32-byte line) and its value.
-      if (((i & 7) != 7) & ((j & 7) != 7) & ((k & 7) != 7)) {
-        const std::uint32_t* slot =
-            index_ + (static_cast<std::ptrdiff_t>(i >> 3) * brick_dims_[1] + (j >> 3)) * brick_dims_[2] + (k >> 3);
-        const std::uint32_t e = *slot;
-        if ((e & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256);
-        const std::uint32_t* table = tables_ + 8 * static_cast<std::size_t>(e);
-        if (((i & 3) != 3) & ((j & 3) != 3) & ((k & 3) != 3)) {  // one octant: fixed offsets
-          const std::uint32_t* entry = table + (((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
-          const std::uint32_t o = *entry;
-          if ((o & blob::kSlotEmpty) != 0) return Uniform8(std::int32_t{static_cast<std::int16_t>(o & 0xFFFFU)} * 256);
-          const std::int16_t* b =
-              octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes + (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
-          return {b[0] * 256, b[1] * 256, b[4] * 256, b[5] * 256, b[16] * 256, b[17] * 256, b[20] * 256, b[21] * 256};
-        }
-        // Per axis and corner: octant bit << 16 | octant-local offset, as in BrickView.
-        const std::uint32_t x0 =
-            ((static_cast<std::uint32_t>(i >> 2) & 1) << 18) | static_cast<std::uint32_t>((i & 3) << 4);
-        const std::uint32_t x1 =
-            ((static_cast<std::uint32_t>((i + 1) >> 2) & 1) << 18) | static_cast<std::uint32_t>(((i + 1) & 3) << 4);
-        const std::uint32_t y0 =
-            ((static_cast<std::uint32_t>(j >> 2) & 1) << 17) | static_cast<std::uint32_t>((j & 3) << 2);
-        const std::uint32_t y1 =
-            ((static_cast<std::uint32_t>((j + 1) >> 2) & 1) << 17) | static_cast<std::uint32_t>(((j + 1) & 3) << 2);
-        const std::uint32_t z0 = ((static_cast<std::uint32_t>(k >> 2) & 1) << 16) | static_cast<std::uint32_t>(k & 3);
-        const std::uint32_t z1 =
-            ((static_cast<std::uint32_t>((k + 1) >> 2) & 1) << 16) | static_cast<std::uint32_t>((k + 1) & 3);
-        const auto at = [&](std::uint32_t t) {
-          const std::uint32_t* entry = table + (t >> 16);
-          const std::uint32_t o = *entry;
-          const bool uniform = (o & blob::kSlotEmpty) != 0;
-          const std::int16_t* p = uniform ? reinterpret_cast<const std::int16_t*>(entry)
-                                          : octants_ + static_cast<std::size_t>(o) * blob::kOctantNodes;
-          return std::int32_t{p[t & (uniform ? 0U : 63U)]} * 256;
-        };
-        return {at(x0 + y0 + z0), at(x0 + y0 + z1), at(x0 + y1 + z0), at(x0 + y1 + z1),
-                at(x1 + y0 + z0), at(x1 + y0 + z1), at(x1 + y1 + z0), at(x1 + y1 + z1)};
-      }
-      const BrickView<2> v = FetchBricks<2>(i, j, k);
-      return {v.Get(0, 0, 0), v.Get(0, 0, 1), v.Get(0, 1, 0), v.Get(0, 1, 1),
-              v.Get(1, 0, 0), v.Get(1, 0, 1), v.Get(1, 1, 0), v.Get(1, 1, 1)};
+      Stencil v = FetchStored(i, j, k);
+      for (std::int32_t& x : v) x *= 256;
+      return v;
     }
     const std::int32_t* b = phi_ + Offset(i, j, k);
     const std::ptrdiff_t si = stride_i_, sj = dims_[2];
     return {b[0], b[1], b[sj], b[sj + 1], b[si], b[si + 1], b[si + sj], b[si + sj + 1]};
+  }
+
+  /// Blob v2: Fetch's corners as stored, Q7.8 (Q16.16 >> 8); same precondition. The corners
+  /// spill into the next octant along the axes where the cell's local coordinate is 3.
+  Stencil FetchStored(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    switch (Spill(i, j, k)) {
+      case 0: {  // one octant: one index entry, one table entry, eight fixed offsets
+        const std::uint32_t* entry = OwnEntry(i, j, k);
+        if ((*entry & blob::kSlotEmpty) != 0) {
+          const std::int32_t v = static_cast<std::int16_t>(*entry & 0xFFFFU);
+          return {v, v, v, v, v, v, v, v};
+        }
+        const std::int16_t* b = OwnCorner(*entry, i, j, k);
+        return {b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]};
+      }
+      case 1:
+        return SpillStencil<1>(i, j, k);
+      case 2:
+        return SpillStencil<2>(i, j, k);
+      case 3:
+        return SpillStencil<3>(i, j, k);
+      case 4:
+        return SpillStencil<4>(i, j, k);
+      case 5:
+        return SpillStencil<5>(i, j, k);
+      case 6:
+        return SpillStencil<6>(i, j, k);
+      default:
+        return SpillStencil<7>(i, j, k);
+    }
   }
 
   /// The 32 values of WideStencil for cell (i,j,k), read in place; same precondition as Fetch.
@@ -433,45 +421,70 @@ class TrilinearSampler {
     std::int32_t i, j, k, fx, fy, fz;
   };
 
-  // Blob v2: the entry of octant (qx, qy, qz) (octant coordinates): the brick's octant-table
-  // entry, or for a uniform brick its index entry; either is an octant number or kSlotEmpty | φ.
-  const std::uint32_t* OctantEntry(std::int32_t qx, std::int32_t qy, std::int32_t qz) const {
-    const std::uint32_t* slot =
-        index_ + (static_cast<std::ptrdiff_t>(qx >> 1) * brick_dims_[1] + (qy >> 1)) * brick_dims_[2] + (qz >> 1);
-    const std::uint32_t e = *slot;
-    if ((e & blob::kSlotEmpty) != 0) return slot;
-    return tables_ + 8 * static_cast<std::size_t>(e) +
-           static_cast<std::size_t>(((qx & 1) << 2) | ((qy & 1) << 1) | (qz & 1));
+  // Blob v2: the axes along which cell (i, j, k)'s corners spill into the next octant (local
+  // coordinate 3): 4·x + 2·y + z.
+  static int Spill(std::int32_t i, std::int32_t j, std::int32_t k) {
+    return (((i & 3) == 3) << 2) | (((j & 3) == 3) << 1) | ((k & 3) == 3);
   }
-  // Fetch() on blob v2 for a cell whose corners spill into the next octant along one axis, Axis
-  // (4: x, 2: y, 1: z): the corners with that coordinate 0 lie in the cell's octant at local
-  // (i mod 4, j mod 4, k mod 4), the others in the next octant at local 0 along Axis. A uniform
-  // octant is read through its entry's low half (its φ, little-endian) with a zero offset mask.
-  template <int Axis>
-  Stencil SpillCorners(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    constexpr std::uint32_t kStep = Axis == 4 ? 16 : Axis == 2 ? 4 : 1;  // the axis's local stride
-    const std::int32_t qx = i >> 2, qy = j >> 2, qz = k >> 2;
-    const std::uint32_t local = static_cast<std::uint32_t>(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
-    const std::uint32_t* ea = OctantEntry(qx, qy, qz);
-    const std::uint32_t* eb = OctantEntry(qx + (Axis >> 2), qy + ((Axis >> 1) & 1), qz + (Axis & 1));
-    const std::uint32_t oa = *ea, ob = *eb;
-    const bool ua = (oa & blob::kSlotEmpty) != 0, ub = (ob & blob::kSlotEmpty) != 0;
-    const std::int16_t* a =
-        ua ? reinterpret_cast<const std::int16_t*>(ea) : octants_ + static_cast<std::size_t>(oa) * blob::kOctantNodes;
-    const std::int16_t* b =
-        ub ? reinterpret_cast<const std::int16_t*>(eb) : octants_ + static_cast<std::size_t>(ob) * blob::kOctantNodes;
-    const std::uint32_t ma = ua ? 0 : 63, mb = ub ? 0 : 63;
-    // In b, the corner at 1 along Axis is node 0 there: local 3 + 1 − 4.
-    const std::uint32_t la = local, lb = local - 4 * kStep;
-    // Corner (dx, dy, dz): offset 16·dx + 4·dy + dz; it lies in b when its Axis coordinate is 1.
-    const auto at = [&](std::uint32_t d, bool in_b) {
-      return std::int32_t{in_b ? b[(lb + d) & mb] : a[(la + d) & ma]} * 256;
+  // Blob v2: the entry of node (i, j, k)'s octant: its brick's octant-table entry, or for a uniform
+  // brick its index entry; either is an octant number or kSlotEmpty | φ.
+  const std::uint32_t* OwnEntry(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    const std::uint32_t* slot = index_ + static_cast<std::ptrdiff_t>(i >> 3) * slot_stride_i_ +
+                                static_cast<std::ptrdiff_t>(j >> 3) * brick_dims_[2] + (k >> 3);
+    if ((*slot & blob::kSlotEmpty) != 0) return slot;
+    return tables_ + 8 * std::size_t{*slot} +
+           static_cast<std::size_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+  }
+  // Blob v2: node (i, j, k) in stored octant number `octant`.
+  const std::int16_t* OwnCorner(std::uint32_t octant, std::int32_t i, std::int32_t j, std::int32_t k) const {
+    return octants_ + static_cast<std::size_t>(octant) * blob::kOctantNodes +
+           (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+  }
+  // Blob v2, a cell whose corners spill into the next octant along the axes in Mask (4: x, 2: y,
+  // 1: z; not 0): corner n (4·dx + 2·dy + dz) lies in octant s = n & Mask of the 2, 4 or 8 it
+  // touches, the cell's own (s = 0) and its next ones along the axes in s. Each is looked up once,
+  // branch-free: its index entry (the cell's own slot, moved one brick along each axis of s where
+  // the cell's octant is its brick's second) and its table entry (the octant bits flipped by s).
+  // A corner is then one load at a constant offset from it: the cell's local offset, plus the
+  // corner's, minus 4 nodes along each axis of s. A uniform brick or octant is read through its
+  // entry's low half (its φ, little-endian) with a zero offset mask. Stored values, Q7.8.
+  template <int Mask>
+  [[gnu::always_inline]] Stencil SpillStencil(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    const std::uint32_t* own = index_ + static_cast<std::ptrdiff_t>(i >> 3) * slot_stride_i_ +
+                               static_cast<std::ptrdiff_t>(j >> 3) * brick_dims_[2] + (k >> 3);
+    const std::ptrdiff_t next[3] = {(i & 4) != 0 ? slot_stride_i_ : 0, (j & 4) != 0 ? brick_dims_[2] : 0,
+                                    (k & 4) != 0 ? 1 : 0};
+    const auto bits = static_cast<std::uint32_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+    const auto local = static_cast<std::uint32_t>(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+    std::array<const std::int16_t*, 8> octant{};
+    std::array<std::uint32_t, 8> mask{};
+#pragma GCC unroll 8
+    for (std::uint32_t s = 0; s < 8; ++s) {
+      if ((s & ~static_cast<std::uint32_t>(Mask)) != 0) continue;
+      const std::uint32_t* slot =
+          own + ((s & 4) != 0 ? next[0] : 0) + ((s & 2) != 0 ? next[1] : 0) + ((s & 1) != 0 ? next[2] : 0);
+      const std::uint32_t e = *slot;
+      const std::uint32_t* entry = (e & blob::kSlotEmpty) != 0 ? slot : tables_ + 8 * std::size_t{e} + (bits ^ s);
+      const std::uint32_t t = *entry;
+      const bool uniform = (t & blob::kSlotEmpty) != 0;
+      octant[s] = uniform ? reinterpret_cast<const std::int16_t*>(entry)
+                          : octants_ + static_cast<std::size_t>(t) * blob::kOctantNodes;
+      mask[s] = uniform ? 0 : 63;
+    }
+    const auto at = [&](std::uint32_t n) -> std::int32_t {
+      const std::uint32_t s = n & static_cast<std::uint32_t>(Mask);
+      const std::uint32_t offset = local + (((n >> 2) & 1) << 4) + (((n >> 1) & 1) << 2) + (n & 1) -
+                                   (((s >> 2) & 1) << 6) - (((s >> 1) & 1) << 4) - ((s & 1) << 2);
+      return octant[s][offset & mask[s]];
     };
-    constexpr auto kX = Axis == 4, kY = Axis == 2, kZ = Axis == 1;
-    return {at(0, false), at(1, kZ),        at(4, kY),        at(5, kY || kZ),
-            at(16, kX),   at(17, kX || kZ), at(20, kX || kY), at(21, true)};
+    return {at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7)};
   }
 
+  // Phi() on blob v2.
+  std::int32_t PhiStored(std::int32_t x, std::int32_t y, std::int32_t z) const;
+  // Phi() on blob v2 for cell (i, j, k) at fractions f, whose corners spill into the next octant
+  // along the axes in `spill` (two or three).
+  std::int32_t PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k, const std::int32_t* f) const;
   // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: `use` applied to the cell's
   // RowView (in one of its 16 forms), returning R. At() and CopyWide() read bricks through it.
   template <typename R, typename Use>
@@ -511,8 +524,6 @@ class TrilinearSampler {
     return s;
   }
 
-  static Stencil Uniform8(std::int32_t c) { return {c, c, c, c, c, c, c, c}; }
-
   const std::int32_t* phi_;      // v1 dense payload, or null for v2
   const std::uint32_t* index_;   // v2 brick index
   const std::uint32_t* tables_;  // v2 octant tables
@@ -521,6 +532,7 @@ class TrilinearSampler {
   std::array<std::int32_t, 3> dims_;
   std::array<std::uint32_t, 3> last_;  // (n − 1)·65536 per axis
   std::ptrdiff_t stride_i_;
+  std::ptrdiff_t slot_stride_i_;  // v2: bny·bnz, the brick index's stride along x
   std::int32_t background_;
   LipschitzBound lipschitz_;
 };
