@@ -225,6 +225,22 @@ std::string BinaryPly(const std::vector<std::array<double, 6>>& points, bool big
 const std::vector<std::array<double, 6>> kBinaryPoints = {
     {0, 0, 0, 1, 0, 0}, {1.5, 0, 0, 0, 2, 0}, {0, -1, 0, 0, 0, 3}, {0, 0, 1, -1, 0, 0}, {0.25, 0.5, 2, 1, 1, 0}};
 
+TEST(ReadPly, PclNormalNamesAreRead) {
+  std::string text = kAsciiPly;
+  for (const char* axis : {"x", "y", "z"}) {
+    const std::string from = std::string("float n") + axis, to = std::string("float normal_") + axis;
+    const std::size_t at = text.find(from);
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+  }
+  text.replace(text.find("int nz"), 6, "int normal_z");
+  const TempFile file("pcl.ply", text);
+  const auto points = ReadPoints(file.path());
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  ASSERT_EQ(points->normals.size(), 4u);
+  EXPECT_EQ(points->normals[1], Eigen::Vector3d(0, 1, 0));
+  EXPECT_EQ(points->normals[2], Eigen::Vector3d(0, 0, 1));
+}
+
 TEST(ReadPly, BinaryLittleAndBigEndianReadTheSamePoints) {
   for (const bool big : {false, true}) {
     std::size_t header = 0;

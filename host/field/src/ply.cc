@@ -297,13 +297,15 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
   }
   if (vertex == elements.size()) return fail(fmt::format("{}: the header declares no 'vertex' element", name));
   static constexpr std::array<const char*, 6> kWanted = {"x", "y", "z", "nx", "ny", "nz"};
+  // PCL writes its normals as normal_x … normal_z.
+  static constexpr std::array<const char*, 6> kAlias = {"x", "y", "z", "normal_x", "normal_y", "normal_z"};
   std::array<std::size_t, 6> slot{};
   std::string missing;
   for (std::size_t k = 0; k < kWanted.size(); ++k) {
     slot[k] = elements[vertex].properties.size();
     for (std::size_t i = 0; i < elements[vertex].properties.size(); ++i) {
       const Property& p = elements[vertex].properties[i];
-      if (p.name == kWanted[k] && !p.list) slot[k] = i;
+      if ((p.name == kWanted[k] || p.name == kAlias[k]) && !p.list) slot[k] = i;
     }
     if (slot[k] == elements[vertex].properties.size())
       missing += fmt::format("{}{}", missing.empty() ? "" : ", ", kWanted[k]);
