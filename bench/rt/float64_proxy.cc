@@ -149,11 +149,12 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         done = true;
         break;
       }
-      const double dn_variation = AxisVariation(dn, field);
-      double dt_variation = AxisVariation(dt, field);
+      // Planned with the band's bound, as proxy::ContactRun does.
+      const Float64Bound& band = field.band();
+      const double dn_variation = AxisVariation(dn, band);
+      double dt_variation = AxisVariation(dt, band);
       const double first_room = std::max(0.0, phi_p + piece - dn_variation);
-      if (dt_variation > first_room && field.norm_helps())
-        dt_variation = std::min(dt_variation, field.norm() * Len(dt));
+      if (dt_variation > first_room && band.norm_helps()) dt_variation = std::min(dt_variation, band.norm() * Len(dt));
       if (halvings > 0) {
         const double s = std::ldexp(1.0, -halvings);
         dt = {dt[0] * s, dt[1] * s, dt[2] * s};
@@ -183,8 +184,10 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         ++samples;
         const double need = phi_p + s.phi + 2 * delta;
         const double piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
+        const bool in_band = phi_p <= field.background() && s.phi <= field.background();
         if (!(s.phi >= -delta / 2 && need >= 0 &&
-              (piece_variation <= need || Certified(phi_p, s.phi, Sub(q, e), field, delta)))) {
+              ((in_band && piece_variation <= need) || (in_band ? Certified(phi_p, s.phi, Sub(q, e), band, delta)
+                                                                : Certified(phi_p, s.phi, Sub(q, e), field, delta))))) {
           break;
         }
         e = q;

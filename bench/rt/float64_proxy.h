@@ -27,6 +27,23 @@ struct Float64Sample {
   Vec3d grad{};
 };
 
+/// A Lipschitz bound in double (sampler::LipschitzBound).
+class Float64Bound {
+ public:
+  explicit Float64Bound(const sampler::LipschitzBound& lb)
+      : norm_(lb.norm / 65536.0),
+        norm_helps_(lb.norm_helps),
+        axis_{lb.axis[0] / 65536.0, lb.axis[1] / 65536.0, lb.axis[2] / 65536.0} {}
+  double norm() const { return norm_; }
+  bool norm_helps() const { return norm_helps_; }
+  const Vec3d& axis() const { return axis_; }
+
+ private:
+  double norm_;
+  bool norm_helps_;
+  Vec3d axis_;
+};
+
 class Float64Field {
  public:
   /// `s` samples `f` (its Lipschitz bound and background are used; on blob v2 it also fetches).
@@ -36,13 +53,15 @@ class Float64Field {
         dims_(f.dims),
         si_(static_cast<std::ptrdiff_t>(f.dims[1]) * f.dims[2]),
         background_(s.background() / 65536.0),
-        norm_(s.lipschitz().norm / 65536.0),
-        norm_helps_(s.lipschitz().norm_helps),
-        axis_{s.lipschitz().axis[0] / 65536.0, s.lipschitz().axis[1] / 65536.0, s.lipschitz().axis[2] / 65536.0} {}
+        whole_(s.lipschitz()),
+        band_(s.lipschitz_band()) {}
 
-  double norm() const { return norm_; }
-  bool norm_helps() const { return norm_helps_; }
-  const Vec3d& axis() const { return axis_; }
+  double norm() const { return whole_.norm(); }
+  bool norm_helps() const { return whole_.norm_helps(); }
+  const Vec3d& axis() const { return whole_.axis(); }
+  /// The band's own bound, for pieces whose ends both have φ ≤ background() (proxy::ContactRun).
+  const Float64Bound& band() const { return band_; }
+  double background() const { return background_; }
 
   double Phi(const Vec3d& x) const;
   Float64Sample At(const Vec3d& x) const;
@@ -138,9 +157,8 @@ class Float64Field {
   std::array<std::int32_t, 3> dims_;
   std::ptrdiff_t si_;
   double background_;
-  double norm_;
-  bool norm_helps_;
-  Vec3d axis_;
+  Float64Bound whole_;
+  Float64Bound band_;
 };
 
 /// proxy::ProxyParams in double (voxels, N per voxel, N).
@@ -191,15 +209,19 @@ inline double Dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * 
 inline Vec3d Sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline double Len(const Vec3d& a) { return std::sqrt(Dot(a, a)); }
 inline double MaxAbs(const Vec3d& a) { return std::max({std::abs(a[0]), std::abs(a[1]), std::abs(a[2])}); }
-inline double AxisVariation(const Vec3d& d, const Float64Field& f) {
+// B: Float64Field (the whole field's bound) or Float64Bound.
+template <typename B>
+double AxisVariation(const Vec3d& d, const B& f) {
   return std::abs(d[0]) * f.axis()[0] + std::abs(d[1]) * f.axis()[1] + std::abs(d[2]) * f.axis()[2];
 }
-inline double Variation(const Vec3d& d, const Float64Field& f, double need) {
+template <typename B>
+double Variation(const Vec3d& d, const B& f, double need) {
   const double axis = AxisVariation(d, f);
   if (axis <= need || !f.norm_helps()) return axis;
   return std::min(axis, f.norm() * Len(d));
 }
-inline bool Certified(double phi_a, double phi_b, const Vec3d& d, const Float64Field& f, double delta) {
+template <typename B>
+bool Certified(double phi_a, double phi_b, const Vec3d& d, const B& f, double delta) {
   const double s = phi_a + phi_b + 2 * delta;
   return s >= 0 && Variation(d, f, s) <= s;
 }

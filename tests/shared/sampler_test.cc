@@ -313,5 +313,63 @@ TEST(Sampler, LipschitzBoundHoldsAndIsTight) {
   }
 }
 
+TEST(Sampler, BandLipschitzBoundCertifiesSegmentsWhoseEndsAreInTheBand) {
+  // A plate tilted from z, stored as palpa build stores it (v2, free-space bounds): the whole
+  // field's bound is floored at 1 per axis (free space), the band's is the plate's own |n_i|
+  // (what the same blob without free-space bounds reports). The band's bound still certifies:
+  // random segments up to 3 voxels per axis whose ends are both ≤ background() and satisfy
+  // φ(a) + φ(b) + 2δ ≥ Λ|b − a| (axis form, δ = 1/4 voxel, ends ≥ −δ/2 as the proxy's are) never
+  // dip below −δ, sampled every 1/64 voxel along them.
+  const double n[3] = {0.3, 0.2, std::sqrt(1 - 0.09 - 0.04)};
+  const auto sdf = [&](double i, double j, double k) { return std::abs(n[0] * i + n[1] * j + n[2] * k - 24) - 1.0; };
+  const std::array<std::uint32_t, 3> dims = {48, 48, 48};
+  const auto bytes = testing::AnalyticBlobV2(dims, 0.0002, 6, sdf);
+  const TrilinearSampler s(blob::Verify(bytes).value());
+  blob::BlobMetaV2 plain;
+  plain.meta = testing::AnalyticMeta(dims, 0.0002, 6);
+  plain.band_inside = 6;
+  plain.free_space_bounds = false;
+  const auto plain_bytes = blob::EncodeV2(plain, testing::AnalyticPhi(dims, 6, sdf));
+  const TrilinearSampler without(blob::Verify(plain_bytes).value());
+  const LipschitzBound& band = s.lipschitz_band();
+  for (std::size_t a = 0; a < 3; ++a) {
+    EXPECT_EQ(s.lipschitz().axis[a], std::max(band.axis[a], kOne)) << a;
+    EXPECT_EQ(band.axis[a], without.lipschitz().axis[a]) << a;
+    EXPECT_LT(band.axis[a], kOne) << a;  // a tilted plane: each axis below 1
+  }
+  EXPECT_EQ(band.norm, without.lipschitz().norm);
+
+  std::mt19937 rng(12);
+  std::uniform_int_distribution<std::int32_t> pos(3 * kOne, 44 * kOne), step(-3 * kOne, 3 * kOne);
+  const std::int64_t delta = kOne / 4;
+  int certified = 0, rejected = 0;
+  for (int t = 0; t < 2000000 && certified < 3000; ++t) {
+    const GridPos a{pos(rng), pos(rng), pos(rng)};
+    const GridPos b{a.x + step(rng), a.y + step(rng), a.z + step(rng)};
+    const std::int64_t pa = s.Phi(a), pb = s.Phi(b);
+    if (pa > s.background() || pb > s.background() || pa < -delta / 2 || pb < -delta / 2) continue;
+    const std::int64_t variation = std::llabs(std::int64_t{b.x} - a.x) * band.axis[0] +
+                                   std::llabs(std::int64_t{b.y} - a.y) * band.axis[1] +
+                                   std::llabs(std::int64_t{b.z} - a.z) * band.axis[2];
+    if (variation > (pa + pb + 2 * delta) << 16) {
+      ++rejected;
+      continue;
+    }
+    ++certified;
+    const double length = std::hypot(b.x - a.x, b.y - a.y, b.z - a.z) / kOne;
+    const int steps = static_cast<int>(length * 64) + 1;
+    for (int m = 0; m <= steps; ++m) {
+      const auto at = [&](std::int32_t u, std::int32_t v) {
+        return static_cast<std::int32_t>(u + (std::int64_t{v} - u) * m / steps);
+      };
+      ASSERT_GE(s.Phi({at(a.x, b.x), at(a.y, b.y), at(a.z, b.z)}), -delta - 2)
+          << "segment " << certified;  // 2 LSB: the samples' rounding
+    }
+  }
+  std::printf("[ measured ] tilted plate, v2: band axis (%.4f, %.4f, %.4f); %d segments certified, %d not\n",
+              band.axis[0] / 65536.0, band.axis[1] / 65536.0, band.axis[2] / 65536.0, certified, rejected);
+  EXPECT_EQ(certified, 3000);
+}
+
 }  // namespace
 }  // namespace palpa::sampler

@@ -202,6 +202,8 @@ struct Tick {
   const sampler::TrilinearSampler& field;
   const ProxyParams& params;
   const LipschitzBound& lb;
+  const LipschitzBound& band;  // lb without v2's free-space floor: for pieces whose ends are ≤ band_top
+  std::int64_t band_top;       // the field's background (free space), Q16.16
   Vec h;
   std::int64_t delta;
   bool far;   // HIP more than 32 voxels away: d is shrunk for the projection products
@@ -223,6 +225,8 @@ struct Tick {
       : field(f),
         params(prm),
         lb(f.lipschitz()),
+        band(f.lipschitz_band()),
+        band_top(f.background()),
         h(hip),
         delta(d),
         far(is_far),
@@ -332,7 +336,10 @@ enum class Contact { kDone, kLeave, kContinue };
 
 [[gnu::noinline]] Contact ContactRun(Tick& t) {
   const ProxyParams& prm = t.params;
-  const std::int64_t ax = t.lb.axis[0], ay = t.lb.axis[1], az = t.lb.axis[2];
+  // Pieces are planned with the band's bound: both ends of a piece normally lie in the band (the
+  // proxy starts within the near band, below band_top), and a piece is certified with it only when
+  // they do (see the check below), else with the whole field's.
+  const std::int64_t ax = t.band.axis[0], ay = t.band.axis[1], az = t.band.axis[2];
   const std::int64_t hx = t.h[0], hy = t.h[1], hz = t.h[2];
   const std::int64_t delta = t.delta;
   std::int64_t px = t.p[0], py = t.p[1], pz = t.p[2];
@@ -394,7 +401,7 @@ enum class Contact { kDone, kLeave, kContinue };
     const std::int64_t dn_variation = nx * ax + ny * ay + nz * az;
     std::int64_t dt_variation = tx * ax + ty * ay + tz * az;
     const std::int64_t first_room = std::max<std::int64_t>(0, ((at.phi + 3 * delta / 2 - kSlack) << 16) - dn_variation);
-    if (dt_variation > first_room && t.lb.norm_helps) dt_variation = Variation(dt, t.lb, first_room);
+    if (dt_variation > first_room && t.band.norm_helps) dt_variation = Variation(dt, t.band, first_room);
     if (t.halvings > 0) {
       dt = Halve(dt, t.halvings);
       dt_variation >>= t.halvings;
@@ -435,8 +442,10 @@ enum class Contact { kDone, kLeave, kContinue };
       // variation without a new product; the exact bound is the fallback.
       const std::int64_t need = (at.phi + s.phi + 2 * delta - kSlack) << 16;
       const std::int64_t piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
+      const bool in_band = at.phi <= t.band_top && s.phi <= t.band_top;
       if (!(s.phi >= -delta / 2 && need >= 0 &&
-            (piece_variation <= need || Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, t.lb, delta)))) {
+            ((in_band && piece_variation <= need) ||
+             Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, in_band ? t.band : t.lb, delta)))) {
         break;
       }
       ex = qx, ey = qy, ez = qz;

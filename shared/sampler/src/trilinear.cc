@@ -46,6 +46,16 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
       }
     }
   }
+  const auto bound = [](std::int32_t bx, std::int32_t by, std::int32_t bz, std::int64_t n2) {
+    LipschitzBound lb;
+    lb.axis = {bx, by, bz};
+    const auto root = static_cast<std::int64_t>(fixed::ISqrt(n2));
+    lb.norm = static_cast<std::int32_t>(root * root == n2 ? root : root + 1);  // round up: a bound
+    lb.norm_helps =
+        std::int64_t{lb.norm} * lb.norm < std::int64_t{bx} * bx + std::int64_t{by} * by + std::int64_t{bz} * bz;
+    return lb;
+  };
+  lipschitz_band_ = bound(mx, my, mz, norm2);
   if (phi_ == nullptr) {
     bool far_bounds = false;  // any empty slot above the outside band
     const std::size_t slots = static_cast<std::size_t>(brick_dims_[0]) * static_cast<std::size_t>(brick_dims_[1]) *
@@ -62,11 +72,7 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
       norm2 = std::max(norm2, std::int64_t{1} << 32);
     }
   }
-  lipschitz_.axis = {mx, my, mz};
-  const auto root = static_cast<std::int64_t>(fixed::ISqrt(norm2));
-  lipschitz_.norm = static_cast<std::int32_t>(root * root == norm2 ? root : root + 1);  // round up: a bound
-  lipschitz_.norm_helps = std::int64_t{lipschitz_.norm} * lipschitz_.norm <
-                          std::int64_t{mx} * mx + std::int64_t{my} * my + std::int64_t{mz} * mz;
+  lipschitz_ = bound(mx, my, mz, norm2);
 }
 
 namespace {

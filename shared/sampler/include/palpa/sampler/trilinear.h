@@ -272,6 +272,11 @@ class TrilinearSampler {
   std::int32_t background() const { return background_; }
   const std::array<std::int32_t, 3>& dims() const { return dims_; }
   const LipschitzBound& lipschitz() const { return lipschitz_; }
+  /// The bound over the band alone: lipschitz() without blob v2's free-space floor (equal to it
+  /// otherwise). It holds along a segment whose two end values are both ≤ background(): the
+  /// segment can only leave the band into free space, where φ ≥ background() ≥ both ends, so a
+  /// dip below them lies on a stretch inside the band (docs/realtime-core.md § Proxy).
+  const LipschitzBound& lipschitz_band() const { return lipschitz_band_; }
   /// (n − 1)·65536 along axis a: the last node's coordinate, Q16.16.
   std::uint32_t last_node(std::size_t a) const { return last_[a]; }
 
@@ -535,6 +540,7 @@ class TrilinearSampler {
   std::ptrdiff_t slot_stride_i_;  // v2: bny·bnz, the brick index's stride along x
   std::int32_t background_;
   LipschitzBound lipschitz_;
+  LipschitzBound lipschitz_band_;
 };
 
 }  // namespace palpa::sampler
