@@ -17,9 +17,20 @@
 namespace palpa::cli {
 namespace {
 
-// `s` as a JSON string literal (bytes that are not UTF-8 become U+FFFD).
-std::string JsonString(const std::string& s) {
-  return nlohmann::json(s).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+// Every EvalResult field, keys as the member names (units in the name: *_error in voxels,
+// max_error_at_m in metres, *_percent in %).
+nlohmann::ordered_json ScoreJson(const mesh::EvalResult& r) {
+  return {{"nodes", r.nodes},
+          {"band_nodes", r.band_nodes},
+          {"mean_abs_error", r.mean_abs_error},
+          {"p99_abs_error", r.p99_abs_error},
+          {"max_abs_error", r.max_abs_error},
+          {"mean_signed_error", r.mean_signed_error},
+          {"max_error_at_m", {r.max_error_at_m.x(), r.max_error_at_m.y(), r.max_error_at_m.z()}},
+          {"wrong_sign_in_band", r.wrong_sign_in_band},
+          {"wrong_sign_in_band_percent", r.wrong_sign_in_band_percent},
+          {"gross_wrong_sign", r.gross_wrong_sign},
+          {"gross_wrong_sign_percent", r.gross_wrong_sign_percent}};
 }
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -63,11 +74,16 @@ int RunEval(const EvalArgs& args) {
     truth_name = args.mesh;
   }
 
+  // Stored φ is exact only within both bands (v2: 6 inside, 2 outside by default); beyond, it is
+  // the clamp, and scoring there would measure the clamp. The default band (3) shrinks to fit.
   mesh::EvalOptions options;
-  options.band_voxels = args.band_voxels;
-  if (options.band_voxels > v.band_voxels) {
-    fmt::print(stderr, "palpa eval: {}: --band {} exceeds the field's narrow band of {} voxels\n", args.field,
-               options.band_voxels, v.band_voxels);
+  const double exact = std::min(field->band_inside, field->band_outside);
+  options.band_voxels = args.band_given ? args.band_voxels : std::min(args.band_voxels, exact);
+  if (options.band_voxels > exact) {
+    fmt::print(stderr,
+               "palpa eval: {}: --band {} exceeds the field's narrow band ({} voxels inside, {} outside); "
+               "rebuild with a wider --band / --band-outside or score a narrower band\n",
+               args.field, options.band_voxels, field->band_inside, field->band_outside);
     return kExitBadInput;
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -87,11 +103,16 @@ int RunEval(const EvalArgs& args) {
   const mesh::EvalResult& r = *score;
 
   if (args.json) {
-    fmt::print(
-        "{{\"field\": {}, \"truth\": {}, \"dims\": [{}, {}, {}], \"voxel\": {:.17g}, \"band_voxels\": {:g}, "
-        "\"seconds_truth\": {:.6f}, \"seconds_score\": {:.6f}, \"score\": {}}}\n",
-        JsonString(args.field), JsonString(truth_name), v.dims[0], v.dims[1], v.dims[2], v.voxel_m, options.band_voxels,
-        seconds_truth, seconds_score, mesh::ToJson(r));
+    const nlohmann::ordered_json out = {{"field", args.field},
+                                        {"truth", truth_name},
+                                        {"dims", {v.dims[0], v.dims[1], v.dims[2]}},
+                                        {"voxel", v.voxel_m},
+                                        {"band_voxels", options.band_voxels},
+                                        {"seconds_truth", seconds_truth},
+                                        {"seconds_score", seconds_score},
+                                        {"score", ScoreJson(r)}};
+    // Bytes of a path that are not UTF-8 become U+FFFD rather than an exception.
+    fmt::print("{}\n", out.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
     return kExitOk;
   }
   fmt::print("{} against {}\n", args.field, truth_name);

@@ -203,9 +203,11 @@ int main(int argc, char** argv) {
   eval->add_option("--sphere", ea.sphere_radius, "Truth: sphere of radius R (model units) at the model origin")
       ->excludes(eval_mesh);
   eval->add_flag("--json", ea.json, "Machine-readable output");
-  eval->add_option("--band", ea.band_voxels, "Score nodes with |true| <= this many voxels")
-      ->capture_default_str()
-      ->check(CLI::Range(0.5, 64.0));
+  auto* eval_band = eval->add_option("--band", ea.band_voxels,
+                                     "Score nodes with |true| <= this many voxels (default 3, or the field's "
+                                     "smaller band, e.g. a v2 field's outside band of 2)")
+                        ->capture_default_str()
+                        ->check(CLI::Range(0.5, 64.0));
   eval->add_option("--threads", ea.threads, "Worker threads (0: all cores)")
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
@@ -298,7 +300,10 @@ int main(int argc, char** argv) {
   if (*falcon_ik) return RunFalconIk(falcon_ik_xyz);
   if (*falcon_fk) return RunFalconFk(falcon_fk_enc);
   if (*sample) return RunSample(sa);
-  if (*eval) return RunEval(ea);
+  if (*eval) {
+    ea.band_given = eval_band->count() > 0;
+    return RunEval(ea);
+  }
   if (*mesh_cmd) return RunMesh(ma);
   if (*view_cmd) return RunView(va);
   if (*slice) {

@@ -256,15 +256,4 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   return Evaluate(field, *grid, options);
 }
 
-std::string ToJson(const EvalResult& r) {
-  return fmt::format(
-      "{{\"nodes\": {}, \"band_nodes\": {}, \"mean_abs_error\": {:.6g}, \"p99_abs_error\": {:.6g}, "
-      "\"max_abs_error\": {:.6g}, \"mean_signed_error\": {:.6g}, \"max_error_at_m\": [{:.9g}, {:.9g}, {:.9g}], "
-      "\"wrong_sign_in_band\": {}, \"wrong_sign_in_band_percent\": {:.6g}, \"gross_wrong_sign\": {}, "
-      "\"gross_wrong_sign_percent\": {:.6g}}}",
-      r.nodes, r.band_nodes, r.mean_abs_error, r.p99_abs_error, r.max_abs_error, r.mean_signed_error,
-      r.max_error_at_m.x(), r.max_error_at_m.y(), r.max_error_at_m.z(), r.wrong_sign_in_band,
-      r.wrong_sign_in_band_percent, r.gross_wrong_sign, r.gross_wrong_sign_percent);
-}
-
 }  // namespace palpa::mesh

@@ -94,8 +94,4 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
 std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Truth& truth,
                                           const EvalOptions& options = {});
 
-/// One JSON object with every EvalResult field (keys as the member names, units in the name:
-/// *_error in voxels, max_error_at_m in metres, *_percent in %).
-std::string ToJson(const EvalResult& result);
-
 }  // namespace palpa::mesh

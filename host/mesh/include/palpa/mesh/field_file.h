@@ -15,7 +15,10 @@ namespace palpa::mesh {
 /// move keeps in place and a copy would not.
 struct LoadedField {
   std::vector<std::byte> bytes;
-  blob::FieldView view;
+  blob::FieldView view;  ///< dense: a v2 file is re-encoded by blob::DenseV1
+  /// The file's own bands, voxels: stored φ is exact on [−band_inside, +band_outside] (v1: both
+  /// its band; v2's default 6 and 2). view.band_voxels is their max, the dense copy's clamp.
+  std::int32_t band_inside = 0, band_outside = 0;
 
   LoadedField() = default;
   LoadedField(LoadedField&&) = default;
@@ -24,7 +27,8 @@ struct LoadedField {
   LoadedField& operator=(const LoadedField&) = delete;
 };
 
-/// blob::ReadFile then blob::Verify. Errors name the file, and the blob's field and byte
+/// blob::ReadFile (as stored) and blob::Verify, then for v2 blob::DenseV1. Errors name the file, and the blob's field
+/// and byte
 /// ("f.palpa: version at byte 8: 7 is not supported ...").
 std::expected<LoadedField, Error> LoadField(const std::string& path);
 
