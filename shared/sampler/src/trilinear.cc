@@ -105,7 +105,7 @@ template <typename R, typename Use>
   // bit. This is OctantEntry with the per-axis products hoisted out of the 8 look-ups; calling
   // OctantEntry instead costs 49 instructions a tick (callgrind, kitten).
   const std::int32_t n[3] = {i - 1, j - 1, k - 1};
-  const std::ptrdiff_t stride[3] = {static_cast<std::ptrdiff_t>(brick_dims_[1]) * brick_dims_[2], brick_dims_[2], 1};
+  const std::ptrdiff_t stride[3] = {slot_stride_i_, brick_dims_[2], 1};
   std::ptrdiff_t slot[3][2];
   std::uint32_t bit[3][2];
   for (std::size_t a = 0; a < 3; ++a) {
@@ -184,7 +184,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   Cell c;
   if (!Locate(x, y, z, c)) return Background();
   if (phi_ == nullptr) {
-    if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks<4>(c.i, c.j, c.k), c.fx, c.fy, c.fz);
+    if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
     return WithRowView<Sample>(
         c.i, c.j,
         c.k, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
@@ -216,7 +216,8 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   Cell c;
   if (!Locate(x, y, z, c)) return background_;
   const std::int32_t i = c.i, j = c.j, k = c.k;
-  switch (Spill(i, j, k)) {
+  const int spill = Spill(i, j, k);
+  switch (spill) {
     case 0: {
       const std::uint32_t* entry = OwnEntry(i, j, k);
       if ((*entry & blob::kSlotEmpty) != 0) return std::int32_t{static_cast<std::int16_t>(*entry & 0xFFFFU)} * 256;
@@ -231,7 +232,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
       return InterpolatePhi<8>(SpillStencil<1>(i, j, k), c.fx, c.fy, c.fz);
     default: {
       const std::int32_t f[3] = {c.fx, c.fy, c.fz};
-      return PhiSpillMany(Spill(i, j, k), i, j, k, f);
+      return PhiSpillMany(spill, i, j, k, f);
     }
   }
 }
@@ -247,7 +248,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
 
 WideStencil TrilinearSampler::CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
   if (phi_ != nullptr) return Copy(FetchWide(i, j, k));
-  if (FaceCell(i, j, k)) return Copy(FetchBricks<4>(i, j, k));
+  if (FaceCell(i, j, k)) return Copy(FetchBricks(i, j, k));
   return WithRowView<WideStencil>(i, j, k, [](const auto& v) { return Copy(v); });
 }
 

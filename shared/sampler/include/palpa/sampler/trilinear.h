@@ -2,8 +2,9 @@
 // RT-safe after construction: no allocation, no exceptions, bounded work (one 8-value or 32-value
 // stencil fetch per sample).
 //
-// Fetching is apart from the math: Fetch() and FetchWide() are the only memory accesses, so a
-// different storage (bricks, a sparse layout) only has to provide those two. InterpolatePhi(),
+// Fetching is apart from the math: on a dense grid Fetch() and FetchWide() are the only memory
+// accesses; blob v2 reads its octants through the forms below (BrickView, RowView, the spill
+// stencils), each giving the interpolation the same values. InterpolatePhi(),
 // InterpolateSmooth() and InterpolateCellGradient() are pure functions of the stencil and the
 // Q0.16 cell fractions, tested against hand-computed vectors, the float64 trilinear formula and
 // analytic shapes (tests/shared/sampler_test.cc).
@@ -80,28 +81,26 @@ struct WideView {
   }
 };
 
-/// The same values read in place from blob v2's 4³ int16 octants (docs/blob-format.md): N nodes
-/// per axis (2: a cell's corners; 4: the wide stencil, nodes −1..2) span at most two octants per
-/// axis, so at most 8. Each node picks its octant by one bit per axis and adds its octant-local
-/// offset; a uniform brick or octant points at its own index or table entry's low half (its φ,
+/// The wide stencil's 32 values read in place from blob v2's 4³ int16 octants
+/// (docs/blob-format.md), for any cell, the grid's faces included: its 4 nodes per axis (−1..2,
+/// face-clamped) span at most two octants per axis, so at most 8. Each node picks its octant by one bit per axis and
+/// adds its octant-local offset; a uniform brick or octant points at its own index or table entry's low half (its φ,
 /// little-endian) with mask 0, so every value is one branch-free load. Stored Q7.8, returned
 /// Q16.16 (·256).
-template <std::size_t N>
 struct BrickView {
   std::array<const std::int16_t*, 8> octant;  // 4·sx + 2·sy + sz
   std::array<std::uint32_t, 8> mask;          // 63 stored, 0 uniform
   // Per axis and node: octant bit (4, 2, 1 or 0) << 16 | local offset (·16, ·4, ·1). The bits and
   // offsets of the three axes are disjoint, so one sum gives both.
-  std::array<std::array<std::uint32_t, N>, 3> node;
+  std::array<std::array<std::uint32_t, 4>, 3> node;
   constexpr std::int32_t Get(std::size_t a, std::size_t b, std::size_t c) const {
     const std::uint32_t t = node[0][a] + node[1][b] + node[2][c];
     const std::uint32_t s = t >> 16;
     return std::int32_t{octant[s][t & mask[s]]} * 256;
   }
-  // The WideStencil interface (N = 4: corner nodes are 1 and 2 on each axis).
-  static constexpr std::size_t kC = N == 4 ? 1 : 0;
+  // The WideStencil interface (corner nodes are 1 and 2 on each axis).
   constexpr std::int32_t Corner(std::size_t n) const {
-    return Get(kC + ((n >> 2) & 1), kC + ((n >> 1) & 1), kC + (n & 1));
+    return Get(1 + ((n >> 2) & 1), 1 + ((n >> 1) & 1), 1 + (n & 1));
   }
   constexpr std::int32_t XOut(std::size_t n) const { return Get((n & 4) ? 3 : 0, 1 + ((n >> 1) & 1), 1 + (n & 1)); }
   constexpr std::int32_t YOut(std::size_t n) const { return Get(1 + ((n >> 2) & 1), (n & 2) ? 3 : 0, 1 + (n & 1)); }
@@ -353,33 +352,25 @@ class TrilinearSampler {
             k + 2 < dims_[2] ? 2 : 1};
   }
 
-  /// Blob v2: the nodes of cell (i,j,k) in place in the octants; N = 2: its corners (i, i+1 per
-  /// axis), N = 4: FetchWide's 32 values (i−1..i+2, face-clamped like FetchWide). Same
-  /// precondition as Fetch.
-  template <std::size_t N>
-  BrickView<N> FetchBricks(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    BrickView<N> v;
+  /// Blob v2: FetchWide's 32 values of cell (i,j,k) in place in the octants (i−1..i+2 per axis,
+  /// face-clamped like FetchWide). Same precondition as Fetch.
+  BrickView FetchBricks(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    BrickView v;
     const std::array<std::int32_t, 3> cell = {i, j, k};
     std::array<std::int32_t, 3> lo{};
     constexpr std::array<std::int32_t, 3> kLocal = {16, 4, 1};
     for (std::size_t a = 0; a < 3; ++a) {
       const std::int32_t c = cell[a];
-      std::array<std::int32_t, N> node{};
-      if constexpr (N == 2) {
-        node = {c, c + 1};
-      } else {
-        node = {c > 0 ? c - 1 : c, c, c + 1, c + 2 < dims_[a] ? c + 2 : c + 1};
-      }
+      const std::array<std::int32_t, 4> node = {c > 0 ? c - 1 : c, c, c + 1, c + 2 < dims_[a] ? c + 2 : c + 1};
       lo[a] = node[0] >> 2;
-      for (std::size_t m = 0; m < N; ++m) {
+      for (std::size_t m = 0; m < 4; ++m) {
         v.node[a][m] = (static_cast<std::uint32_t>((node[m] >> 2) - lo[a]) << (18 - a)) |
                        static_cast<std::uint32_t>((node[m] & 3) * kLocal[a]);
       }
     }
     // Per axis, the index offset and octant-table bit of the first and second octant (the second
     // clamped to the last octant: it is then never selected, and the lookup stays in the index).
-    const std::array<std::ptrdiff_t, 3> stride = {static_cast<std::ptrdiff_t>(brick_dims_[1]) * brick_dims_[2],
-                                                  brick_dims_[2], 1};
+    const std::array<std::ptrdiff_t, 3> stride = {slot_stride_i_, brick_dims_[2], 1};
     std::array<std::array<std::ptrdiff_t, 2>, 3> off{};
     std::array<std::array<std::uint32_t, 2>, 3> sub{};
     for (std::size_t a = 0; a < 3; ++a) {
@@ -494,7 +485,7 @@ class TrilinearSampler {
   // RowView (in one of its 16 forms), returning R. At() and CopyWide() read bricks through it.
   template <typename R, typename Use>
   R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const Use& use) const;
-  // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks<4> reads those).
+  // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks reads those).
   bool FaceCell(std::int32_t i, std::int32_t j, std::int32_t k) const {
     // One unsigned compare per axis: interior is 1 ≤ cell ≤ n − 3 (none when n < 4).
     return (static_cast<std::uint32_t>(i - 1) >= static_cast<std::uint32_t>(dims_[0] - 3)) |
