@@ -117,15 +117,21 @@ bool Prepare(const std::string& path) {
 
 // One sample per iteration: φ alone (kGradient false, Phi) or φ and ∇φ (At), on the bricks or the
 // dense copy, at the random points or along the strokes.
-template <bool kGradient, bool kBricks, bool kStrokes>
+template <bool kGradient, bool kBricks, bool kStrokes, bool kCached = false>
 void BM_Sample(benchmark::State& state) {
   const Fixture& f = Get();
   const TrilinearSampler s(kBricks ? f.v2 : f.v1);
   const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
+  palpa::sampler::PhiCache phi_cache;
+  palpa::sampler::GradientCache gradient_cache;
   std::size_t n = 0;
   for (auto _ : state) {
-    if constexpr (kGradient) {
+    if constexpr (kGradient && kCached) {
+      benchmark::DoNotOptimize(s.At(points[n], gradient_cache));
+    } else if constexpr (kGradient) {
       benchmark::DoNotOptimize(s.At(points[n]));
+    } else if constexpr (kCached) {
+      benchmark::DoNotOptimize(s.Phi(points[n], phi_cache));
     } else {
       benchmark::DoNotOptimize(s.Phi(points[n]));
     }
@@ -209,6 +215,10 @@ BENCHMARK(BM_Sample<false, false, true>)->Name("Phi_strokes/dense");
 BENCHMARK(BM_Sample<false, true, true>)->Name("Phi_strokes/bricks");
 BENCHMARK(BM_Sample<true, false, true>)->Name("At_strokes/dense");
 BENCHMARK(BM_Sample<true, true, true>)->Name("At_strokes/bricks");
+BENCHMARK(BM_Sample<false, true, false, true>)->Name("Phi/bricks_cached");
+BENCHMARK(BM_Sample<true, true, false, true>)->Name("At/bricks_cached");
+BENCHMARK(BM_Sample<false, true, true, true>)->Name("Phi_strokes/bricks_cached");
+BENCHMARK(BM_Sample<true, true, true, true>)->Name("At_strokes/bricks_cached");
 BENCHMARK(BM_LookupDenseIndex)->Name("Lookup/dense_index");
 BENCHMARK(BM_LookupHash)->Name("Lookup/hash");
 

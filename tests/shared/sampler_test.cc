@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <functional>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -369,6 +370,185 @@ TEST(Sampler, BandLipschitzBoundCertifiesSegmentsWhoseEndsAreInTheBand) {
   std::printf("[ measured ] tilted plate, v2: band axis (%.4f, %.4f, %.4f); %d segments certified, %d not\n",
               band.axis[0] / 65536.0, band.axis[1] / 65536.0, band.axis[2] / 65536.0, certified, rejected);
   EXPECT_EQ(certified, 3000);
+}
+
+// A v2 field with every kind of cell: the union of a sphere (radius r voxels) and a tilted plane
+// crossing a 27×30×22 grid (not multiples of 8: the last bricks are partial), stored with octants
+// inside, outside and on the surface, uniform octants and bricks, free-space bounds, and band
+// values on every face of the grid.
+std::vector<std::byte> CacheTestBlob(double r) {
+  return testing::AnalyticBlobV2({27, 30, 22}, 0.0002, 6, [r](double i, double j, double k) {
+    const double sphere = std::sqrt((i - 12.3) * (i - 12.3) + (j - 15.1) * (j - 15.1) + (k - 10.7) * (k - 10.7)) - r;
+    const double plane = (30 - 0.5 * i - 0.6 * j - 0.62 * k) / std::sqrt(0.25 + 0.36 + 0.3844);
+    return std::min(sphere, plane);
+  });
+}
+
+void ExpectSameSample(const Sample& a, const Sample& b, const char* what, int n) {
+  ASSERT_EQ(a.phi, b.phi) << what << " sample " << n;
+  ASSERT_EQ(a.grad, b.grad) << what << " sample " << n;
+  ASSERT_EQ(a.in_grid, b.in_grid) << what << " sample " << n;
+}
+
+TEST(SampleCache, CachedSamplesEqualUncachedBitForBit) {
+  // Walks of 0.02 to 0.6 voxel steps (most samples land in the previous cell: a hit), from anywhere
+  // in and around the grid, through octant and brick borders, uniform octants, the grid's faces
+  // (whose At cells are never cached) and out of it, with every 5th walk snapped now and then onto
+  // a last node (Locate's fraction-1 case, the one a hit must not take). Every cached Phi and At
+  // equals the uncached one; the cells of consecutive samples show how many could hit.
+  const auto bytes = CacheTestBlob(9);
+  const TrilinearSampler s(blob::Verify(bytes).value());
+  std::mt19937 rng(21);
+  std::uniform_int_distribution<std::int32_t> start_x(-2 * kOne, 28 * kOne), start_y(-2 * kOne, 31 * kOne),
+      start_z(-2 * kOne, 23 * kOne);
+  std::uniform_real_distribution<double> length(0.02, 0.6), unit(-1, 1);
+  PhiCache phi_cache;
+  GradientCache gradient_cache;
+  int n = 0, same_cell = 0, last_nodes = 0;
+  GridPos previous{-1, -1, -1};
+  for (int walk = 0; walk < 400; ++walk) {
+    GridPos p{start_x(rng), start_y(rng), start_z(rng)};
+    for (int step = 0; step < 150; ++step, ++n) {
+      if (walk % 5 == 0 && step % 9 == 4) {  // onto the last node along one axis
+        const int a = step % 3;
+        (a == 0 ? p.x : a == 1 ? p.y : p.z) = (a == 0 ? 26 : a == 1 ? 29 : 21) * kOne;
+        ++last_nodes;
+      }
+      same_cell +=
+          (p.x >> 16) == (previous.x >> 16) && (p.y >> 16) == (previous.y >> 16) && (p.z >> 16) == (previous.z >> 16);
+      previous = p;
+      ASSERT_EQ(s.Phi(p, phi_cache), s.Phi(p)) << "Phi sample " << n;
+      ExpectSameSample(s.At(p, gradient_cache), s.At(p), "At", n);
+      const double d[3] = {unit(rng), unit(rng), unit(rng)};
+      const double l = length(rng) / std::max(1e-9, std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
+      p = {p.x + static_cast<std::int32_t>(d[0] * l * kOne), p.y + static_cast<std::int32_t>(d[1] * l * kOne),
+           p.z + static_cast<std::int32_t>(d[2] * l * kOne)};
+    }
+  }
+  std::printf("[ measured ] %d samples, %d in the previous sample's cell, %d on a last node\n", n, same_cell,
+              last_nodes);
+  EXPECT_GT(same_cell, n / 2);
+  EXPECT_GT(last_nodes, 1000);
+}
+
+TEST(SampleCache, LastNodeAfterItsCellAndBack) {
+  // Locate puts the last node of an axis at fraction 1 of the cell below it, whose corners a cache
+  // may hold: the node must read its own value, then the cell below must hit and stay exact. Every
+  // face node whose value differs from the node below it, on the three last faces.
+  const auto bytes = CacheTestBlob(9);
+  const TrilinearSampler s(blob::Verify(bytes).value());
+  const std::array<std::int32_t, 3> last = {26, 29, 21};
+  int checked = 0;
+  for (std::size_t a = 0; a < 3; ++a) {
+    for (std::int32_t u = 0; u < 30; ++u) {
+      for (std::int32_t w = 0; w < 30; ++w) {
+        std::array<std::int32_t, 3> c{};
+        c[a] = last[a];
+        c[(a + 1) % 3] = u;
+        c[(a + 2) % 3] = w;
+        if (c[(a + 1) % 3] > last[(a + 1) % 3] || c[(a + 2) % 3] > last[(a + 2) % 3]) continue;
+        const GridPos node{c[0] * kOne, c[1] * kOne, c[2] * kOne};
+        GridPos below = node;
+        (a == 0 ? below.x : a == 1 ? below.y : below.z) -= kOne / 3;
+        GridPos cell_node = node;
+        (a == 0 ? cell_node.x : a == 1 ? cell_node.y : cell_node.z) -= kOne;
+        if (s.Phi(node) == s.Phi(cell_node)) continue;
+        ++checked;
+        PhiCache pc;
+        for (const GridPos p : {below, node, node, below, node})
+          ASSERT_EQ(s.Phi(p, pc), s.Phi(p)) << a << " " << u << " " << w;
+      }
+    }
+  }
+  std::printf("[ measured ] %d last-face nodes whose value differs from the node below\n", checked);
+  EXPECT_GT(checked, 100);
+}
+
+TEST(SampleCache, AHitReadsTheCacheNotTheIndex) {
+  // After a sample, point the sample's octant (its brick's table entry) at another stored octant in
+  // the blob (which the sampler reads in place): an uncached sample reads the new octant, a sample
+  // in the same cell through the cache still the old one (a hit: the index was not read), and after
+  // a sample in another cell the new one (a miss). Shows that hits happen and that a cache holds what a
+  // field gave it, which is why a field must not change under its sampler (palpad swaps samplers).
+  auto bytes = CacheTestBlob(9);
+  const blob::FieldView v = blob::Verify(bytes).value();
+  const TrilinearSampler s(v);
+  const GridPos p{20 * kOne + 9000, 15 * kOne + 30000, 10 * kOne + 100}, q{p.x + 2000, p.y - 3000, p.z + 4000};
+  const GridPos elsewhere{5 * kOne, 5 * kOne, 5 * kOne};
+  const std::int32_t i = p.x >> 16, j = p.y >> 16, k = p.z >> 16;  // cell (20, 15, 10): local (0, 3, 2)
+  const std::uint32_t slot =
+      v.brick_index[static_cast<std::size_t>(((i >> 3) * v.brick_dims[1] + (j >> 3)) * v.brick_dims[2] + (k >> 3))];
+  ASSERT_EQ(slot & blob::kSlotEmpty, 0U);
+  auto* entry = const_cast<std::uint32_t*>(v.brick_tables + 8 * std::size_t{slot} +
+                                           (((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1)));
+  ASSERT_EQ(*entry & blob::kSlotEmpty, 0U);
+  PhiCache pc;
+  GradientCache gc;
+  const std::int32_t phi_p = s.Phi(p, pc), phi_q = s.Phi(q);
+  const Sample at_p = s.At(p, gc);
+  const std::uint32_t stored = *entry;
+  *entry = stored == 0 ? 1 : 0;
+  ASSERT_NE(s.Phi(p), phi_p);  // the index now gives other values
+  ASSERT_NE(s.Phi(q), phi_q);
+  ASSERT_NE(s.At(p).phi, at_p.phi);
+  EXPECT_EQ(s.Phi(p, pc), phi_p);  // hits
+  EXPECT_EQ(s.Phi(q, pc), phi_q);
+  ExpectSameSample(s.At(p, gc), at_p, "At hit", 0);
+  s.Phi(elsewhere, pc);  // misses, then misses again in the cell of p
+  s.At(elsewhere, gc);
+  EXPECT_EQ(s.Phi(p, pc), s.Phi(p));
+  ExpectSameSample(s.At(p, gc), s.At(p), "At after a miss", 0);
+  *entry = stored;
+}
+
+TEST(SampleCache, NeverAnswersForAnotherSampler) {
+  // Two fields, their samplers built one after the other in the same storage (the same address):
+  // a cache filled by the first answers the second with the second's values.
+  const auto a = CacheTestBlob(9), b = CacheTestBlob(7);
+  std::optional<TrilinearSampler> s;
+  const GridPos p{17 * kOne + 1234, 15 * kOne + 999, 10 * kOne + 31000};
+  s.emplace(blob::Verify(a).value());
+  PhiCache pc;
+  GradientCache gc;
+  const std::int32_t phi_a = s->Phi(p, pc);
+  const std::int32_t at_phi_a = s->At(p, gc).phi;
+  const TrilinearSampler* first = &*s;
+  s.emplace(blob::Verify(b).value());
+  ASSERT_EQ(&*s, first);
+  const TrilinearSampler& other = *s;
+  EXPECT_NE(other.Phi(p), phi_a);
+  EXPECT_EQ(other.Phi(p, pc), other.Phi(p));
+  EXPECT_NE(other.At(p).phi, at_phi_a);
+  ExpectSameSample(other.At(p, gc), other.At(p), "At, other sampler", 0);
+}
+
+TEST(SampleCache, ACopiedGradientCacheStartsEmpty) {
+  // A uniform octant's address points into the cache's own `expanded`, so a copy must not reuse
+  // the addresses: after the original moves on, the copy still samples exactly.
+  const auto bytes = CacheTestBlob(9);
+  const TrilinearSampler s(blob::Verify(bytes).value());
+  GradientCache original;
+  const GridPos p{12 * kOne + 500, 15 * kOne + 100, 2 * kOne + 40000};  // near the sphere's bottom
+  s.At(p, original);
+  ASSERT_NE(original.sampler, 0U);
+  GradientCache copy = original, assigned;
+  assigned = original;
+  EXPECT_EQ(copy.sampler, 0U);
+  EXPECT_EQ(assigned.sampler, 0U);
+  s.At({20 * kOne, 25 * kOne, 17 * kOne}, original);
+  ExpectSameSample(s.At(p, copy), s.At(p), "At through a copy", 0);
+}
+
+TEST(SampleCache, ADenseGridLeavesItUntouched) {
+  const auto bytes = testing::SphereBlob(20, 0.0002, 4, 6);
+  const TrilinearSampler s(blob::Verify(bytes).value());
+  PhiCache pc;
+  GradientCache gc;
+  const GridPos p{9 * kOne + 5, 3 * kOne + 700, 10 * kOne};
+  EXPECT_EQ(s.Phi(p, pc), s.Phi(p));
+  ExpectSameSample(s.At(p, gc), s.At(p), "At dense", 0);
+  EXPECT_EQ(pc.sampler, 0U);
+  EXPECT_EQ(gc.sampler, 0U);
 }
 
 }  // namespace

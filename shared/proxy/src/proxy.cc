@@ -200,6 +200,7 @@ Local FromSample(const sampler::Sample& s) {
 // the steps are separate functions so that each keeps its few values in registers.
 struct Tick {
   const sampler::TrilinearSampler& field;
+  ProxyState& caches;  // its sampling caches only (the rest is written back at the end of the tick)
   const ProxyParams& params;
   const LipschitzBound& lb;
   const LipschitzBound& band;  // lb without v2's free-space floor: for pieces whose ends are ≤ band_top
@@ -220,9 +221,10 @@ struct Tick {
   bool leave_blocked;  // the straight way to an outside HIP runs into the object: slide instead
 
   // Member by member (an aggregate initialisation here compiles to a block clear first).
-  Tick(const sampler::TrilinearSampler& f, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far, bool is_fast,
-       Vec proxy, const Local& local, bool have_grad, std::int64_t phi_at_hip, bool have_phi_h)
+  Tick(const sampler::TrilinearSampler& f, ProxyState& s, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far,
+       bool is_fast, Vec proxy, const Local& local, bool have_grad, std::int64_t phi_at_hip, bool have_phi_h)
       : field(f),
+        caches(s),
         params(prm),
         lb(f.lipschitz()),
         band(f.lipschitz_band()),
@@ -247,7 +249,7 @@ enum class Next { kContinue, kDone };
 
 Next SamplePhiAtHip(Tick& t) {
   t.phi_h = t.field.Phi(static_cast<std::int32_t>(t.h[0]), static_cast<std::int32_t>(t.h[1]),
-                        static_cast<std::int32_t>(t.h[2]));
+                        static_cast<std::int32_t>(t.h[2]), t.caches.hip_phi_cache);
   t.phi_h_known = true;
   ++t.samples;
   return Next::kContinue;
@@ -279,7 +281,7 @@ Next SamplePhiAtHip(Tick& t) {
   const Vec x = Plus(t.p, Scale(d, step, len));
   if (step <= 0 || x == t.p) return Next::kDone;  // cannot happen above the near band
   t.p = x;
-  t.at.phi = t.field.Phi(ToGridPos(x));
+  t.at.phi = t.field.Phi(ToGridPos(x), t.caches.proxy_phi_cache);
   t.grad_valid = false;
   ++t.samples;
   return Next::kContinue;
@@ -313,7 +315,7 @@ Next SamplePhiAtHip(Tick& t) {
     }
     const Vec q = Plus(t.p, Scale(d, std::min(step, len), len));
     if (q == t.p) break;
-    const std::int64_t phi_q = t.field.Phi(ToGridPos(q));
+    const std::int64_t phi_q = t.field.Phi(ToGridPos(q), t.caches.proxy_phi_cache);
     ++t.samples;
     if (phi_q < -t.delta / 2 || !Certified(t.at.phi, phi_q, Sub(q, t.p), t.lb, t.delta)) break;
     t.p = q;
@@ -431,10 +433,10 @@ enum class Contact { kDone, kLeave, kContinue };
       const auto x = static_cast<std::int32_t>(qx), y = static_cast<std::int32_t>(qy),
                  z = static_cast<std::int32_t>(qz);
       if (with_gradient) {
-        s = t.field.At(x, y, z);
+        s = t.field.At(x, y, z, t.caches.proxy_gradient_cache);
         ++t.gradient_samples;
       } else {
-        s.phi = t.field.Phi(x, y, z);
+        s.phi = t.field.Phi(x, y, z, t.caches.proxy_phi_cache);
       }
       ++t.samples;
       // Certification of the piece [e, q]: |∇φ·piece| ≤ |∇φ·Δn| + |∇φ·Δt-part| pointwise, so the
@@ -526,15 +528,23 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
   // Start-up, reset, or a HIP that has been inside since then: the proxy follows the HIP with zero
   // force until the HIP is outside once (no entry side is known before that).
   if (!state.valid || !state.seated) {
-    const std::int32_t phi_start = field.Phi(h);
-    state = {h, phi_start, {}, 0, false, h, phi_start >= 0, true};
+    const std::int32_t phi_start = field.Phi(h, state.hip_phi_cache);
+    // Member by member: the caches stay (an aggregate would clear their 1.2 kB every such tick).
+    state.proxy = h;
+    state.phi = phi_start;
+    state.grad = {};
+    state.inv_grad2 = 0;
+    state.grad_valid = false;
+    state.last_hip = h;
+    state.seated = phi_start >= 0;
+    state.valid = true;
     r.proxy = h;
     r.iterations = 1;
     return r;
   }
 
   const std::int64_t delta = params.depth_tolerance_q16;
-  Tick t(field, params, Pos(h), delta,
+  Tick t(field, state, params, Pos(h), delta,
          MaxAbs(Diff(h, state.proxy)) > (std::int64_t{1} << 21),  // the proxy moves < 1 voxel a sample
          AxisVariation(Diff(h, state.last_hip), field.lipschitz()) >
              std::int64_t{params.settle_samples} * ((3 * delta / 2) << 16),
@@ -550,7 +560,7 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
     }
     if (!t.grad_valid) {  // arrived from free motion or leaving: φ and ∇φ at the proxy first
       t.at = FromSample(field.At(static_cast<std::int32_t>(t.p[0]), static_cast<std::int32_t>(t.p[1]),
-                                 static_cast<std::int32_t>(t.p[2])));
+                                 static_cast<std::int32_t>(t.p[2]), state.proxy_gradient_cache));
       t.grad_valid = true;
       ++t.samples;
       ++t.gradient_samples;
@@ -596,7 +606,7 @@ namespace {
 // the general tick (which then marches, or makes contact).
 [[gnu::noinline]] TickResult FreeSampled(const sampler::TrilinearSampler& field, const ProxyParams& params,
                                          ProxyState& state, const GridPos& h, const Vec& d) {
-  const std::int32_t phi_h = field.Phi(h);
+  const std::int32_t phi_h = field.Phi(h, state.hip_phi_cache);
   if (phi_h > 0 && Certified(state.phi, phi_h, d, field.lipschitz(), params.depth_tolerance_q16)) {
     state.proxy = h;
     state.last_hip = h;

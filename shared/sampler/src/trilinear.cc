@@ -1,9 +1,35 @@
 #include "palpa/sampler/trilinear.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 
+// GCC packs a cell's 8 corners into vectors to store them in a PhiCache: about 20 shuffles on
+// every miss, which cost more than the 8 plain stores they replace (palpa_blob_v2_bench). Clang
+// (the fuzz and sanitizer builds) does not take the attribute.
+#if defined(__GNUC__) && !defined(__clang__)
+#define PALPA_NO_SLP __attribute__((optimize("no-tree-slp-vectorize")))
+#else
+#define PALPA_NO_SLP
+#endif
+
 namespace palpa::sampler {
+namespace {
+
+// Sampler ids for caches: 1, 2, 3, ...
+std::uint64_t NextId() {
+  static std::atomic<std::uint64_t> next{0};
+  return next.fetch_add(1, std::memory_order_relaxed) + 1;
+}
+
+// Copies a cell's corners into a PhiCache element by element, from the registers they were loaded
+// into (an aggregate copy goes through a stack temporary and a wide reload, which stalls).
+[[gnu::always_inline]] inline void Keep(const Stencil& v, Stencil& cache) {
+#pragma GCC unroll 8
+  for (std::size_t n = 0; n < 8; ++n) cache[n] = v[n];
+}
+
+}  // namespace
 
 TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
     : phi_(field.phi),
@@ -16,7 +42,8 @@ TrilinearSampler::TrilinearSampler(const blob::FieldView& field)
             static_cast<std::uint32_t>(field.dims[2] - 1) << 16},
       stride_i_(static_cast<std::ptrdiff_t>(field.dims[1]) * field.dims[2]),
       slot_stride_i_(static_cast<std::ptrdiff_t>(field.brick_dims[1]) * field.brick_dims[2]),
-      background_((field.phi != nullptr ? field.band_voxels : field.band_outside) << 16) {
+      background_((field.phi != nullptr ? field.band_voxels : field.band_outside) << 16),
+      id_(NextId()) {
   // One pass over every cell through Fetch (the storage's only access path). Skipped: cells whose
   // corners are all equal (free space and deep inside, most of the grid: zero gradient) and cells
   // with every corner ≤ −1 voxel (φ ≤ −1 throughout; the bound is only needed on {φ > −1}, see
@@ -97,9 +124,9 @@ template <int Lx, int Lz, typename R, typename Use>
 
 }  // namespace
 
-template <typename R, typename Use>
-[[gnu::always_inline]] inline R TrilinearSampler::WithRowView(std::int32_t i, std::int32_t j, std::int32_t k,
-                                                              const Use& use) const {
+[[gnu::always_inline]] inline void TrilinearSampler::RowOctants(
+    std::int32_t i, std::int32_t j, std::int32_t k, std::array<std::uintptr_t, 8>& moved,
+    std::array<std::array<std::int16_t, blob::kOctantNodes>, 8>& expanded) const {
   // Per axis, the first node n = cell − 1 and the two octants the 4 nodes can touch, those of n and
   // n + 3 (the same one when n mod 4 = 0): the index offset of their brick and their octant-table
   // bit. This is OctantEntry with the per-axis products hoisted out of the 8 look-ups; calling
@@ -122,8 +149,6 @@ template <typename R, typename Use>
   const std::uint32_t* const index = index_;
   const std::uint32_t* const tables = tables_;
   const std::int16_t* const octants = octants_;
-  std::array<std::uintptr_t, 8> moved;
-  alignas(16) std::int16_t expanded[8][blob::kOctantNodes];
 #pragma GCC unroll 4
   for (std::size_t xy = 0; xy < 4; ++xy) {
     const std::ptrdiff_t row = slot[0][xy >> 1] + slot[1][xy & 1];
@@ -138,13 +163,20 @@ template <typename R, typename Use>
       if ((t & blob::kSlotEmpty) == 0) {
         o = octants + static_cast<std::size_t>(t) * blob::kOctantNodes;
       } else {
-        std::fill_n(expanded[s], blob::kOctantNodes, static_cast<std::int16_t>(t & 0xFFFFU));
-        o = expanded[s];
+        expanded[s].fill(static_cast<std::int16_t>(t & 0xFFFFU));
+        o = expanded[s].data();
       }
       moved[s] = reinterpret_cast<std::uintptr_t>(o) + shift - 2 * (64 * (s >> 2) + 16 * ((s >> 1) & 1) + 4 * (s & 1));
     }
   }
-  switch ((lx << 2) | static_cast<std::uint32_t>(n[2] & 3)) {
+}
+
+template <typename R, typename Use>
+[[gnu::always_inline]] inline R TrilinearSampler::WithRowView(std::int32_t i, std::int32_t j, std::int32_t k,
+                                                              const std::array<std::uintptr_t, 8>& moved,
+                                                              const Use& use) const {
+  const auto lx = static_cast<std::uint32_t>((i - 1) & 3), ly = static_cast<std::uint32_t>((j - 1) & 3);
+  switch ((lx << 2) | static_cast<std::uint32_t>((k - 1) & 3)) {
     case 0:
       return WithRows<0, 0, R>(moved, ly, use);
     case 1:
@@ -185,26 +217,53 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
   if (!Locate(x, y, z, c)) return Background();
   if (phi_ == nullptr) {
     if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
+    std::array<std::uintptr_t, 8> moved;
+    alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded;
+    RowOctants(c.i, c.j, c.k, moved, expanded);
     return WithRowView<Sample>(
-        c.i, c.j,
-        c.k, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
+        c.i, c.j, c.k,
+        moved, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
   }
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
 
+Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z, GradientCache& cache) const {
+  if (phi_ != nullptr) return At(x, y, z);
+  Cell c;
+  if (cache.cell == CacheCell(x, y, z) && cache.sampler == id_) {
+    c = {x >> 16, y >> 16, z >> 16, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF};
+  } else {
+    if (!Locate(x, y, z, c)) return Background();
+    if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
+    RowOctants(c.i, c.j, c.k, cache.moved, cache.expanded);
+    cache.sampler = id_;
+    cache.cell = CacheCell(c);
+  }
+  return WithRowView<Sample>(
+      c.i, c.j, c.k, cache.moved, [&](const auto& v) __attribute__((always_inline)) {
+        return InterpolateSmooth(v, c.fx, c.fy, c.fz);
+      });
+}
+
 // Blob v2, a cell that spills along two or three axes (10/64 of cells): out of line, so that Phi's
 // common paths do not save its registers.
-[[gnu::noinline]] std::int32_t TrilinearSampler::PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k,
-                                                              const std::int32_t* f) const {
+template <bool kCache>
+[[gnu::noinline]] PALPA_NO_SLP std::int32_t TrilinearSampler::PhiSpillMany(int spill, std::int32_t i, std::int32_t j,
+                                                                           std::int32_t k, const std::int32_t* f,
+                                                                           Stencil* keep) const {
+  const auto phi = [&](const Stencil& v) __attribute__((always_inline)) {
+    if constexpr (kCache) Keep(v, *keep);
+    return InterpolatePhi<8>(v, f[0], f[1], f[2]);
+  };
   switch (spill) {
     case 3:
-      return InterpolatePhi<8>(SpillStencil<3>(i, j, k), f[0], f[1], f[2]);
+      return phi(SpillStencil<3>(i, j, k));
     case 5:
-      return InterpolatePhi<8>(SpillStencil<5>(i, j, k), f[0], f[1], f[2]);
+      return phi(SpillStencil<5>(i, j, k));
     case 6:
-      return InterpolatePhi<8>(SpillStencil<6>(i, j, k), f[0], f[1], f[2]);
+      return phi(SpillStencil<6>(i, j, k));
     default:
-      return InterpolatePhi<8>(SpillStencil<7>(i, j, k), f[0], f[1], f[2]);
+      return phi(SpillStencil<7>(i, j, k));
   }
 }
 
@@ -212,27 +271,43 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
 // A cell inside one octant (27/64 of cells): one index entry, one table entry, eight fixed offsets;
 // a uniform brick or octant is its value (the weights sum to exactly 2^32, so eight equal values
 // interpolate to that value). Spilling along one axis (27/64) inline, along more out of line.
-[[gnu::noinline]] std::int32_t TrilinearSampler::PhiStored(std::int32_t x, std::int32_t y, std::int32_t z) const {
+// kCache: a cell equal to the cache's is interpolated from its corners; any other is read as
+// above and its corners kept (8 stores).
+template <bool kCache>
+[[gnu::noinline]] PALPA_NO_SLP std::int32_t TrilinearSampler::PhiStored(std::int32_t x, std::int32_t y, std::int32_t z,
+                                                                        PhiCache* cache) const {
   Cell c;
   if (!Locate(x, y, z, c)) return background_;
   const std::int32_t i = c.i, j = c.j, k = c.k;
+  if constexpr (kCache) {
+    cache->sampler = id_;
+    cache->cell = CacheCell(c);
+  }
+  const auto phi = [&](const Stencil& v) __attribute__((always_inline)) {
+    if constexpr (kCache) Keep(v, cache->corners);
+    return InterpolatePhi<8>(v, c.fx, c.fy, c.fz);
+  };
   const int spill = Spill(i, j, k);
   switch (spill) {
     case 0: {
       const std::uint32_t* entry = OwnEntry(i, j, k);
-      if ((*entry & blob::kSlotEmpty) != 0) return std::int32_t{static_cast<std::int16_t>(*entry & 0xFFFFU)} * 256;
+      if ((*entry & blob::kSlotEmpty) != 0) {
+        const std::int32_t v = static_cast<std::int16_t>(*entry & 0xFFFFU);
+        if constexpr (kCache) cache->corners.fill(v);
+        return v * 256;
+      }
       const std::int16_t* b = OwnCorner(*entry, i, j, k);
-      return InterpolatePhi<8>({b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]}, c.fx, c.fy, c.fz);
+      return phi({b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]});
     }
     case 4:
-      return InterpolatePhi<8>(SpillStencil<4>(i, j, k), c.fx, c.fy, c.fz);
+      return phi(SpillStencil<4>(i, j, k));
     case 2:
-      return InterpolatePhi<8>(SpillStencil<2>(i, j, k), c.fx, c.fy, c.fz);
+      return phi(SpillStencil<2>(i, j, k));
     case 1:
-      return InterpolatePhi<8>(SpillStencil<1>(i, j, k), c.fx, c.fy, c.fz);
+      return phi(SpillStencil<1>(i, j, k));
     default: {
       const std::int32_t f[3] = {c.fx, c.fy, c.fz};
-      return PhiSpillMany(spill, i, j, k, f);
+      return PhiSpillMany<kCache>(spill, i, j, k, f, kCache ? &cache->corners : nullptr);
     }
   }
 }
@@ -240,16 +315,26 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
 // Dense (v1): the corners at fixed strides; blob v2 in a function of its own (a tail call), so that
 // neither saves the other's registers.
 [[gnu::flatten]] std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t z) const {
-  if (phi_ == nullptr) return PhiStored(x, y, z);
+  if (phi_ == nullptr) return PhiStored<false>(x, y, z, nullptr);
   Cell c;
   if (!Locate(x, y, z, c)) return background_;
   return InterpolatePhi(Fetch(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
 
+std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t z, PhiCache& cache) const {
+  if (phi_ != nullptr) return Phi(x, y, z);
+  if (cache.cell == CacheCell(x, y, z) && cache.sampler == id_)
+    return InterpolatePhi<8>(cache.corners, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF);
+  return PhiStored<true>(x, y, z, &cache);
+}
+
 WideStencil TrilinearSampler::CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
   if (phi_ != nullptr) return Copy(FetchWide(i, j, k));
   if (FaceCell(i, j, k)) return Copy(FetchBricks(i, j, k));
-  return WithRowView<WideStencil>(i, j, k, [](const auto& v) { return Copy(v); });
+  std::array<std::uintptr_t, 8> moved;
+  alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded;
+  RowOctants(i, j, k, moved, expanded);
+  return WithRowView<WideStencil>(i, j, k, moved, [](const auto& v) { return Copy(v); });
 }
 
 }  // namespace palpa::sampler

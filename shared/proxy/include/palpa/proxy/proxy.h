@@ -94,6 +94,12 @@ struct ProxyState {
   GridPos last_hip;     ///< the HIP of the last tick (its speed decides the contact sample budget)
   bool seated = false;  ///< the HIP has been outside the object since the (re)start
   bool valid = false;   ///< false: next tick starts the proxy at the HIP (start-up, reset)
+  /// Blob v2: the cells last sampled at the proxy and at the HIP (sampler::PhiCache), which a tick
+  /// mostly samples again. They change how fast a sample is read, never its value, and record
+  /// their sampler, so they need no reset (not even after a field swap).
+  sampler::PhiCache proxy_phi_cache;
+  sampler::GradientCache proxy_gradient_cache;
+  sampler::PhiCache hip_phi_cache;
 };
 
 /// What one tick produced.

@@ -260,6 +260,40 @@ struct LipschitzBound {
   bool norm_helps = false;
 };
 
+/// Blob v2 sampling that is coherent (each sample near the last, as a proxy's are) keeps one of
+/// these per sampling point, from one sample to the next: a sample in the cell of the previous one
+/// then reads the cell's 8 corners (PhiCache) or its 8 octant addresses (GradientCache) from it
+/// instead of through the brick index, as OpenVDB's ValueAccessor keeps the last node it visited.
+/// Results are the same bits with or without a cache: it holds exactly what the index gave. A miss
+/// costs the look-up plus the stores that fill the cache (about 30 instructions); a hit skips the
+/// look-up (docs/blob-format.md § Sampling in place). A cache records the id of the sampler that
+/// filled it (unique per constructed sampler, 64 bits), so it never answers for another field, not
+/// even one constructed at the same address; the field's bytes must not change while a sampler
+/// reads them (they never do: palpad swaps whole blobs and samplers). Value-initialised: empty. Not
+/// thread-safe: one per caller. A dense grid leaves it untouched.
+struct PhiCache {
+  std::uint64_t sampler = 0;  ///< id of the sampler that filled it; 0: empty
+  std::uint64_t cell = 0;     ///< its cell (i, j, k), 16 bits an axis: i << 32 | j << 16 | k
+  Stencil corners{};          ///< the cell's corners as stored, Q7.8
+};
+
+/// At's counterpart of PhiCache (1.1 kB): the RowView addresses of an interior cell's 8 octants.
+/// A copy starts empty, since the addresses of uniform octants point into the original.
+struct GradientCache {
+  std::uint64_t sampler = 0;              ///< as PhiCache
+  std::uint64_t cell = 0;                 ///< as PhiCache
+  std::array<std::uintptr_t, 8> moved{};  ///< octant addresses, moved as RowView reads them
+  /// A uniform octant expanded to 64 values, for `moved` to point into.
+  alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded{};
+
+  GradientCache() = default;
+  GradientCache(const GradientCache& /*other*/) noexcept {}
+  GradientCache& operator=(const GradientCache& /*other*/) noexcept {
+    sampler = 0;
+    return *this;
+  }
+};
+
 /// Samples a verified FieldView. Positions outside [0, n−1] on any axis answer the background
 /// (+band voxels, the value of free space) with a zero gradient; nothing outside the payload is
 /// ever read.
@@ -287,6 +321,13 @@ class TrilinearSampler {
   /// struct (packing two int32 into one register costs the caller a store-forwarding stall).
   std::int32_t Phi(std::int32_t x, std::int32_t y, std::int32_t z) const;
   Sample At(std::int32_t x, std::int32_t y, std::int32_t z) const;
+
+  /// Phi and At through a cache (blob v2; a dense grid ignores it): the same bits, and a sample in
+  /// the cell of the previous one skips the brick index. RT-safe.
+  std::int32_t Phi(std::int32_t x, std::int32_t y, std::int32_t z, PhiCache& cache) const;
+  Sample At(std::int32_t x, std::int32_t y, std::int32_t z, GradientCache& cache) const;
+  std::int32_t Phi(GridPos p, PhiCache& cache) const { return Phi(p.x, p.y, p.z, cache); }
+  Sample At(GridPos p, GradientCache& cache) const { return At(p.x, p.y, p.z, cache); }
 
   /// φ and the analytic in-cell gradient at `p`. RT-safe; for comparison and tests.
   Sample AtCellGradient(GridPos p) const {
@@ -476,15 +517,38 @@ class TrilinearSampler {
     return {at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7)};
   }
 
-  // Phi() on blob v2.
-  std::int32_t PhiStored(std::int32_t x, std::int32_t y, std::int32_t z) const;
+  // Phi() on blob v2; kCache: through `cache` (else null).
+  template <bool kCache>
+  std::int32_t PhiStored(std::int32_t x, std::int32_t y, std::int32_t z, PhiCache* cache) const;
+  // The cache's `cell` of the cell holding Q16.16 position (x, y, z): ⌊x⌋, ⌊y⌋, ⌊z⌋ as 16-bit
+  // fields, one per value an int32 >> 16 can take, so no two positions in different cells share it.
+  static std::uint64_t CacheCell(std::int32_t x, std::int32_t y, std::int32_t z) {
+    return static_cast<std::uint64_t>(static_cast<std::uint16_t>(x >> 16)) << 32 |
+           static_cast<std::uint64_t>(static_cast<std::uint16_t>(y >> 16)) << 16 |
+           static_cast<std::uint64_t>(static_cast<std::uint16_t>(z >> 16));
+  }
+  // The cache's `cell` of cell c as Locate found it (each index 0 .. 4094). Only these are cached: a position
+  // whose CacheCell equals one lies inside that cell, below the grid's last node, at the fractions
+  // given by its low 16 bits, exactly as Locate would place it (not so the last node itself, which
+  // Locate puts at fraction 1 of the cell below).
+  static std::uint64_t CacheCell(const Cell& c) {
+    return static_cast<std::uint64_t>(c.i) << 32 | static_cast<std::uint64_t>(c.j) << 16 |
+           static_cast<std::uint64_t>(c.k);
+  }
   // Phi() on blob v2 for cell (i, j, k) at fractions f, whose corners spill into the next octant
-  // along the axes in `spill` (two or three).
-  std::int32_t PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k, const std::int32_t* f) const;
-  // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: `use` applied to the cell's
-  // RowView (in one of its 16 forms), returning R. At() and CopyWide() read bricks through it.
+  // along the axes in `spill` (two or three); kCache: the corners are also written to `keep`.
+  template <bool kCache>
+  std::int32_t PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k, const std::int32_t* f,
+                            Stencil* keep) const;
+  // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: the moved addresses of the 8
+  // octants its RowView reads (a uniform one expanded into `expanded` first).
+  void RowOctants(std::int32_t i, std::int32_t j, std::int32_t k, std::array<std::uintptr_t, 8>& moved,
+                  std::array<std::array<std::int16_t, blob::kOctantNodes>, 8>& expanded) const;
+  // `use` applied to cell (i, j, k)'s RowView on the addresses RowOctants gave (in one of its 16
+  // forms), returning R. At() and CopyWide() read bricks through it.
   template <typename R, typename Use>
-  R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const Use& use) const;
+  R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const std::array<std::uintptr_t, 8>& moved,
+                const Use& use) const;
   // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks reads those).
   bool FaceCell(std::int32_t i, std::int32_t j, std::int32_t k) const {
     // One unsigned compare per axis: interior is 1 ≤ cell ≤ n − 3 (none when n < 4).
@@ -530,6 +594,7 @@ class TrilinearSampler {
   std::ptrdiff_t stride_i_;
   std::ptrdiff_t slot_stride_i_;  // v2: bny·bnz, the brick index's stride along x
   std::int32_t background_;
+  std::uint64_t id_;  // unique per constructed sampler, never 0: what a cache records
   LipschitzBound lipschitz_;
   LipschitzBound lipschitz_band_;
 };
