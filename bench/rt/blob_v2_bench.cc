@@ -5,7 +5,10 @@
 //   palpa_blob_v2_bench [--field=FIELD.palpa]   # a v2 blob from palpa build; default: a sphere
 //
 // Points: 4096 fixed random positions with |φ| below the band (where the proxy samples), the same
-// for both storages. Dense: a FieldView over blob::DenseQ16 of the v2 blob (identical values).
+// for both storages; strokes: 64 walks of 64 steps of 0.1 voxel (coherent, as a proxy samples).
+// Dense: a FieldView over blob::DenseQ16 of the v2 blob (identical values). bricks: the sampler's
+// plain Phi/At on the blob; bricks_cached: the same through a PhiCache/GradientCache kept from one
+// sample to the next, as the proxy keeps them (a dense grid has no use for one).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
