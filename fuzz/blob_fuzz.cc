@@ -1,9 +1,10 @@
 // libFuzzer harness (issue 7): blob::Verify on arbitrary bytes, then, for a blob it accepts, the
 // sampler built on it and sampled at points derived from the input. Built with clang,
 // -fsanitize=fuzzer,address,undefined, by fuzz/CMakeLists.txt (a separate project; fuzz/run).
-// Beyond the sanitizers it checks three invariants of a verified blob and traps on a breach:
-// Phi() == At().phi everywhere, φ at a node equals the stored node value, and outside the grid
-// the background.
+// Beyond the sanitizers it checks four invariants of a verified blob and traps on a breach:
+// Phi() == At().phi everywhere, φ at a node equals the stored node value, outside the grid the
+// background, and sampling through a PhiCache / GradientCache (kept across the input's samples,
+// so that most near points hit) gives the same bits as without.
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -31,6 +32,8 @@ void Check(const std::vector<std::uint64_t>& words, std::size_t size, const std:
     return;
   }
   const palpa::sampler::TrilinearSampler s(*view);
+  palpa::sampler::PhiCache phi_cache;
+  palpa::sampler::GradientCache gradient_cache;
   std::uint64_t seed = size;
   for (std::size_t i = 0; i < size && i < 64; ++i) seed = seed * 131 + data[i];
   for (int n = 0; n < 64; ++n) {
@@ -51,6 +54,13 @@ void Check(const std::vector<std::uint64_t>& words, std::size_t size, const std:
     const palpa::sampler::Sample at = s.At(p);
     if (phi != at.phi) __builtin_trap();
     if (!at.in_grid && phi != s.background()) __builtin_trap();
+    // The point and one within 1/8 voxel of it (mostly the same cell) through the caches.
+    const auto near = [&](std::int32_t v) { return v + static_cast<std::int32_t>(Mix(seed) % 16384) - 8192; };
+    for (const palpa::sampler::GridPos x : {p, palpa::sampler::GridPos{near(p.x), near(p.y), near(p.z)}}) {
+      if (s.Phi(x, phi_cache) != s.Phi(x)) __builtin_trap();
+      const palpa::sampler::Sample cached = s.At(x, gradient_cache), plain = s.At(x);
+      if (cached.phi != plain.phi || cached.grad != plain.grad || cached.in_grid != plain.in_grid) __builtin_trap();
+    }
   }
 }
 
