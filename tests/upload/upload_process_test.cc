@@ -285,6 +285,7 @@ TEST(UploadProcess, EveryRefusalHasAReasonOnBothSidesAndKeepsTheField) {
   const auto expect_refused = [&](const char* what, Refusal expected, Refusal got, const std::string& client_text,
                                   const std::string& log_name) {
     SCOPED_TRACE(what);
+    std::printf("[ refused ] %-12s client: %s\n", what, client_text.c_str());
     EXPECT_EQ(got, expected) << client_text;
     EXPECT_NE(client_text.find(log_name), std::string::npos) << client_text;
     // palpad logs the same sentence; give the log a moment (the refusal is logged before it is sent).
@@ -372,6 +373,10 @@ TEST(UploadProcess, EveryRefusalHasAReasonOnBothSidesAndKeepsTheField) {
     const RawReply r = ReadRawReply(raw);
     expect_refused("body tag", Refusal::kBodyTag, r.refusal, r.text, "body altered");
   }
+  // The transcript: palpad's side of every refusal above.
+  std::istringstream log(p.log());
+  for (std::string line; std::getline(log, line);)
+    if (line.find("refused") != std::string::npos) std::printf("[ palpad  ] %s\n", line.c_str());
   const auto s = FetchStatus(p.endpoint(), in.k, 2000ms);
   ASSERT_TRUE(s.has_value());
   EXPECT_EQ(s->uploads_refused, static_cast<std::uint64_t>(refusals));
