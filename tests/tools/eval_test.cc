@@ -240,6 +240,41 @@ TEST(Eval, RefusesMismatchedGridsAndBands) {
   EXPECT_FALSE(mesh::TrueDistances(View(bytes), Truth::Mesh(open)));
 }
 
+TEST(Eval, ScoresABlobV2InPlaceWithinItsExactBands) {
+  // The sphere stored as v2 (6 voxels inside, 2 outside) scores like its dense copy within 2
+  // voxels; a band of 3 is refused on the v2 view, which knows φ is clamped beyond 2 outside (the
+  // dense copy's band is the symmetric 6, so it cannot tell).
+  const BlobSpec s = SphereSpec();
+  const auto v1 = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  const blob::FieldView dense = View(v1);
+  blob::BlobMetaV2 m;
+  m.meta.dims = s.dims;
+  m.meta.origin_m = dense.origin_m;
+  m.meta.voxel_m = dense.voxel_m;
+  m.meta.fit_scale = dense.fit_scale;
+  m.meta.fit_offset_m = dense.fit_offset_m;
+  const auto v2 = blob::EncodeV2(m, blob::DenseQ16(dense));
+  const blob::FieldView stored = View(v2);
+  ASSERT_EQ(stored.version, blob::kVersion2);
+  const auto copy = blob::DenseV1(stored);
+  mesh::EvalOptions two;
+  two.band_voxels = 2;
+  const auto a = mesh::Evaluate(stored, Truth::Sphere(kSphereRadiusModel), two);
+  const auto b = mesh::Evaluate(View(copy), Truth::Sphere(kSphereRadiusModel), two);
+  ASSERT_TRUE(a) << a.error().message;
+  ASSERT_TRUE(b) << b.error().message;
+  EXPECT_EQ(a->band_nodes, b->band_nodes);
+  EXPECT_EQ(a->max_abs_error, b->max_abs_error);
+  EXPECT_EQ(a->mean_signed_error, b->mean_signed_error);
+  EXPECT_LT(a->max_abs_error, 1.0 / 256);  // Q7.8 rounding (≤ 1/512) and the float truth
+  EXPECT_GT(a->band_nodes, 10000U);
+  mesh::EvalOptions three;
+  three.band_voxels = 3;
+  const auto refused = mesh::Evaluate(stored, Truth::Sphere(kSphereRadiusModel), three);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("(6 voxels inside, 2 outside)"), std::string::npos) << refused.error().message;
+}
+
 class EvalCli : public TempDirTest {};
 
 // The number `key` of the output's "score" object (palpa eval --json).

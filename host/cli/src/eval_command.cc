@@ -48,7 +48,8 @@ int RunEval(const EvalArgs& args) {
     fmt::print(stderr, "palpa eval: give exactly one truth, --mesh MESH.off or --sphere R\n");
     return kExitBadInput;
   }
-  auto field = mesh::LoadField(args.field);
+  // As stored: Evaluate reads v2 in place and knows its two bands (a dense copy would not).
+  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);
   if (!field) {
     fmt::print(stderr, "palpa eval: {}\n", field.error().message);
     return kExitBadInput;
@@ -77,13 +78,14 @@ int RunEval(const EvalArgs& args) {
   // Stored φ is exact only within both bands (v2: 6 inside, 2 outside by default); beyond, it is
   // the clamp, and scoring there would measure the clamp. The default band (3) shrinks to fit.
   mesh::EvalOptions options;
-  const double exact = std::min(field->band_inside, field->band_outside);
+  // (Evaluate refuses a wider band too; here it is refused before the truth is computed.)
+  const double exact = std::min(v.band_voxels, v.band_outside);
   options.band_voxels = args.band_given ? args.band_voxels : std::min(args.band_voxels, exact);
   if (options.band_voxels > exact) {
     fmt::print(stderr,
                "palpa eval: {}: --band {} exceeds the field's narrow band ({} voxels inside, {} outside); "
                "rebuild with a wider --band / --band-outside or score a narrower band\n",
-               args.field, options.band_voxels, field->band_inside, field->band_outside);
+               args.field, options.band_voxels, v.band_voxels, v.band_outside);
     return kExitBadInput;
   }
   const auto t0 = std::chrono::steady_clock::now();

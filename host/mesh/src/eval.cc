@@ -203,17 +203,27 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   if (!(options.band_voxels > 0) || options.band_voxels > truth.exact_within_voxels)
     return std::unexpected(Error{fmt::format("band {} voxels is outside (0, {}], where the truth is exact",
                                              options.band_voxels, truth.exact_within_voxels)});
-  if (options.band_voxels > field.band_voxels)
-    return std::unexpected(Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels)",
-                                             options.band_voxels, field.band_voxels)});
+  // Stored φ is exact on [−band_voxels, +band_outside] (v1: its band both ways; v2: 6 and 2 by
+  // default); beyond, it is the clamp (or v2's free-space bound), and scoring there would score that.
+  if (options.band_voxels > std::min(field.band_voxels, field.band_outside))
+    return std::unexpected(
+        Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels inside, {} outside)",
+                          options.band_voxels, field.band_voxels, field.band_outside)});
   EvalResult r;
   r.nodes = truth.voxels.size();
   std::vector<float> abs_errors;
   double sum_abs = 0;
   double sum_signed = 0;
   std::size_t max_at = 0;
+  const auto sny = static_cast<std::size_t>(field.dims[1]);
+  const auto snz = static_cast<std::size_t>(field.dims[2]);
   for (std::size_t n = 0; n < r.nodes; ++n) {
-    const double phi = static_cast<double>(field.phi[n]) / 65536.0;
+    // v1 in its dense payload; v2 read in place, node by node.
+    const std::int32_t q = field.phi != nullptr ? field.phi[n]
+                                                : field.NodeQ16(static_cast<std::int32_t>(n / (sny * snz)),
+                                                                static_cast<std::int32_t>((n / snz) % sny),
+                                                                static_cast<std::int32_t>(n % snz));
+    const double phi = static_cast<double>(q) / 65536.0;
     const double t = truth.voxels[n];
     const bool wrong = (phi <= 0 && t > 0) || (phi > 0 && t < 0);
     if (std::abs(t) <= options.band_voxels) {
@@ -238,8 +248,6 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   const auto rank = static_cast<std::size_t>(std::ceil(0.99 * band)) - 1;
   std::nth_element(abs_errors.begin(), abs_errors.begin() + static_cast<std::ptrdiff_t>(rank), abs_errors.end());
   r.p99_abs_error = abs_errors[rank];
-  const auto sny = static_cast<std::size_t>(field.dims[1]);
-  const auto snz = static_cast<std::size_t>(field.dims[2]);
   r.max_error_at_m =
       Eigen::Vector3d(field.origin_m[0], field.origin_m[1], field.origin_m[2]) +
       field.voxel_m * Eigen::Vector3d(static_cast<double>(max_at / (sny * snz)),

@@ -2,16 +2,14 @@
 
 namespace palpa::mesh {
 
-std::expected<LoadedField, Error> LoadField(const std::string& path) {
+std::expected<LoadedField, Error> LoadField(const std::string& path, blob::Load load) {
   auto bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
   if (!bytes) return std::unexpected(Error{bytes.error().what()});
   LoadedField out;
   out.bytes = std::move(*bytes);
   auto view = blob::Verify(out.bytes);
   if (!view) return std::unexpected(Error{path + ": " + view.error().what()});
-  out.band_inside = view->band_voxels;
-  out.band_outside = view->band_outside;
-  if (view->version == blob::kVersion2) {
+  if (load == blob::Load::kDense && view->version == blob::kVersion2) {
     out.bytes = blob::DenseV1(*view);
     view = blob::Verify(out.bytes);
     if (!view) return std::unexpected(Error{path + ": " + view.error().what()});  // not reached: DenseV1 is valid

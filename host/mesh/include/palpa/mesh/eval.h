@@ -83,10 +83,12 @@ struct EvalResult {
   double gross_wrong_sign_percent = 0;      ///< 100·gross_wrong_sign / nodes (ALL nodes)
 };
 
-/// Scores `field` against a truth computed on the same grid (dims, origin and voxel must match
-/// exactly). Deterministic and independent of the thread count.
-/// Errors: grid mismatch; band_voxels > truth.exact_within_voxels; band_voxels > the field's own
-/// narrow band (φ is clamped there, so errors would be the clamp's); no node in the band.
+/// Scores `field` (v1, or v2 read in place) against a truth computed on the same grid (dims,
+/// origin and voxel must match exactly). Deterministic and independent of the thread count.
+/// Errors: grid mismatch; band_voxels > truth.exact_within_voxels; band_voxels > the field's exact
+/// band, the smaller of its inside and outside bands (φ is clamped beyond, so errors would be the
+/// clamp's; a v2 blob's dense copy, blob::DenseV1, has a symmetric band and so cannot tell: score
+/// the v2 view itself, or pass its bands as palpa eval does); no node in the band.
 std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
                                           const EvalOptions& options = {});
 

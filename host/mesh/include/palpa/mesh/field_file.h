@@ -15,10 +15,7 @@ namespace palpa::mesh {
 /// move keeps in place and a copy would not.
 struct LoadedField {
   std::vector<std::byte> bytes;
-  blob::FieldView view;  ///< dense: a v2 file is re-encoded by blob::DenseV1
-  /// The file's own bands, voxels: stored φ is exact on [−band_inside, +band_outside] (v1: both
-  /// its band; v2's default 6 and 2). view.band_voxels is their max, the dense copy's clamp.
-  std::int32_t band_inside = 0, band_outside = 0;
+  blob::FieldView view;  ///< Load::kDense: a v2 file re-encoded by blob::DenseV1; else as stored
 
   LoadedField() = default;
   LoadedField(LoadedField&&) = default;
@@ -27,10 +24,11 @@ struct LoadedField {
   LoadedField& operator=(const LoadedField&) = delete;
 };
 
-/// blob::ReadFile (as stored) and blob::Verify, then for v2 blob::DenseV1. Errors name the file, and the blob's field
-/// and byte
-/// ("f.palpa: version at byte 8: 7 is not supported ...").
-std::expected<LoadedField, Error> LoadField(const std::string& path);
+/// blob::ReadFile (as stored) and blob::Verify, then with Load::kDense (the tools that index φ
+/// densely: mesh, slice, view) a v2 blob re-encoded by blob::DenseV1, whose symmetric band is the
+/// larger of v2's two. Errors name the file, and the blob's field and byte ("f.palpa: version at
+/// byte 8: 7 is not supported ...").
+std::expected<LoadedField, Error> LoadField(const std::string& path, blob::Load load = blob::Load::kDense);
 
 /// Position of node (i, j, k) in device metres: origin + (i, j, k)·voxel.
 inline Eigen::Vector3d NodePosition(const blob::FieldView& f, int i, int j, int k) {
