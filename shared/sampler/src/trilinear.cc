@@ -248,19 +248,19 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z, Grad
 // Blob v2, a cell that spills along two or three axes (10/64 of cells): out of line, so that Phi's
 // common paths do not save its registers.
 template <bool kCache>
-[[gnu::noinline]] PALPA_NO_SLP std::int32_t TrilinearSampler::PhiSpillMany(int spill, std::int32_t i, std::int32_t j,
-                                                                           std::int32_t k, const std::int32_t* f,
-                                                                           Stencil* keep) const {
+[[gnu::noinline]] PALPA_NO_SLP std::int32_t TrilinearSampler::PhiSpillMany(std::uint32_t spill, std::int32_t i,
+                                                                           std::int32_t j, std::int32_t k,
+                                                                           const std::int32_t* f, Stencil* keep) const {
   const auto phi = [&](const Stencil& v) __attribute__((always_inline)) {
     if constexpr (kCache) Keep(v, *keep);
     return InterpolatePhi<8>(v, f[0], f[1], f[2]);
   };
   switch (spill) {
-    case 3:
+    case kSpillY | kSpillZ:
       return phi(SpillStencil<3>(i, j, k));
-    case 5:
+    case kSpillX | kSpillZ:
       return phi(SpillStencil<5>(i, j, k));
-    case 6:
+    case kSpillX | kSpillY:
       return phi(SpillStencil<6>(i, j, k));
     default:
       return phi(SpillStencil<7>(i, j, k));
@@ -287,7 +287,8 @@ template <bool kCache>
     if constexpr (kCache) Keep(v, cache->corners);
     return InterpolatePhi<8>(v, c.fx, c.fy, c.fz);
   };
-  const int spill = Spill(i, j, k);
+  const std::uint32_t local = Local(i, j, k);
+  const std::uint32_t spill = Spill(local);
   switch (spill) {
     case 0: {
       const std::uint32_t* entry = OwnEntry(i, j, k);
@@ -296,14 +297,14 @@ template <bool kCache>
         if constexpr (kCache) cache->corners.fill(v);
         return v * 256;
       }
-      const std::int16_t* b = OwnCorner(*entry, i, j, k);
+      const std::int16_t* b = OwnCorner(*entry, local);
       return phi({b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]});
     }
-    case 4:
+    case kSpillX:
       return phi(SpillStencil<4>(i, j, k));
-    case 2:
+    case kSpillY:
       return phi(SpillStencil<2>(i, j, k));
-    case 1:
+    case kSpillZ:
       return phi(SpillStencil<1>(i, j, k));
     default: {
       const std::int32_t f[3] = {c.fx, c.fy, c.fz};

@@ -351,27 +351,28 @@ class TrilinearSampler {
   /// Blob v2: Fetch's corners as stored, Q7.8 (Q16.16 >> 8); same precondition. The corners
   /// spill into the next octant along the axes where the cell's local coordinate is 3.
   Stencil FetchStored(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    switch (Spill(i, j, k)) {
+    const std::uint32_t local = Local(i, j, k);
+    switch (Spill(local)) {
       case 0: {  // one octant: one index entry, one table entry, eight fixed offsets
         const std::uint32_t* entry = OwnEntry(i, j, k);
         if ((*entry & blob::kSlotEmpty) != 0) {
           const std::int32_t v = static_cast<std::int16_t>(*entry & 0xFFFFU);
           return {v, v, v, v, v, v, v, v};
         }
-        const std::int16_t* b = OwnCorner(*entry, i, j, k);
+        const std::int16_t* b = OwnCorner(*entry, local);
         return {b[0], b[1], b[4], b[5], b[16], b[17], b[20], b[21]};
       }
-      case 1:
+      case kSpillZ:
         return SpillStencil<1>(i, j, k);
-      case 2:
+      case kSpillY:
         return SpillStencil<2>(i, j, k);
-      case 3:
+      case kSpillY | kSpillZ:
         return SpillStencil<3>(i, j, k);
-      case 4:
+      case kSpillX:
         return SpillStencil<4>(i, j, k);
-      case 5:
+      case kSpillX | kSpillZ:
         return SpillStencil<5>(i, j, k);
-      case 6:
+      case kSpillX | kSpillY:
         return SpillStencil<6>(i, j, k);
       default:
         return SpillStencil<7>(i, j, k);
@@ -458,11 +459,14 @@ class TrilinearSampler {
     std::int32_t i, j, k, fx, fy, fz;
   };
 
-  // Blob v2: the axes along which cell (i, j, k)'s corners spill into the next octant (local
-  // coordinate 3): 4·x + 2·y + z.
-  static int Spill(std::int32_t i, std::int32_t j, std::int32_t k) {
-    return (((i & 3) == 3) << 2) | (((j & 3) == 3) << 1) | ((k & 3) == 3);
+  // Blob v2: cell (i, j, k)'s node offset in its octant, 16·(i mod 4) + 4·(j mod 4) + k mod 4.
+  static std::uint32_t Local(std::int32_t i, std::int32_t j, std::int32_t k) {
+    return static_cast<std::uint32_t>(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
   }
+  // Blob v2: the axes along which a cell's corners spill into the next octant (local coordinate
+  // 3, both bits of its field in `local` set), as bits 4 (x), 2 (y) and 0 (z): kSpillX etc.
+  static constexpr std::uint32_t kSpillX = 0x10, kSpillY = 0x04, kSpillZ = 0x01;
+  static std::uint32_t Spill(std::uint32_t local) { return local & (local >> 1) & (kSpillX | kSpillY | kSpillZ); }
   // Blob v2: the entry of node (i, j, k)'s octant: its brick's octant-table entry, or for a uniform
   // brick its index entry; either is an octant number or kSlotEmpty | φ.
   const std::uint32_t* OwnEntry(std::int32_t i, std::int32_t j, std::int32_t k) const {
@@ -473,9 +477,8 @@ class TrilinearSampler {
            static_cast<std::size_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
   }
   // Blob v2: node (i, j, k) in stored octant number `octant`.
-  const std::int16_t* OwnCorner(std::uint32_t octant, std::int32_t i, std::int32_t j, std::int32_t k) const {
-    return octants_ + static_cast<std::size_t>(octant) * blob::kOctantNodes +
-           (((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+  const std::int16_t* OwnCorner(std::uint32_t octant, std::uint32_t local) const {
+    return octants_ + static_cast<std::size_t>(octant) * blob::kOctantNodes + local;
   }
   // Blob v2, a cell whose corners spill into the next octant along the axes in Mask (4: x, 2: y,
   // 1: z; not 0): corner n (4·dx + 2·dy + dz) lies in octant s = n & Mask of the 2, 4 or 8 it
@@ -492,7 +495,7 @@ class TrilinearSampler {
     const std::ptrdiff_t next[3] = {(i & 4) != 0 ? slot_stride_i_ : 0, (j & 4) != 0 ? brick_dims_[2] : 0,
                                     (k & 4) != 0 ? 1 : 0};
     const auto bits = static_cast<std::uint32_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
-    const auto local = static_cast<std::uint32_t>(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+    const std::uint32_t local = Local(i, j, k);
     std::array<const std::int16_t*, 8> octant{};
     std::array<std::uint32_t, 8> mask{};
 #pragma GCC unroll 8
@@ -538,7 +541,7 @@ class TrilinearSampler {
   // Phi() on blob v2 for cell (i, j, k) at fractions f, whose corners spill into the next octant
   // along the axes in `spill` (two or three); kCache: the corners are also written to `keep`.
   template <bool kCache>
-  std::int32_t PhiSpillMany(int spill, std::int32_t i, std::int32_t j, std::int32_t k, const std::int32_t* f,
+  std::int32_t PhiSpillMany(std::uint32_t spill, std::int32_t i, std::int32_t j, std::int32_t k, const std::int32_t* f,
                             Stencil* keep) const;
   // Blob v2, cell (i, j, k) with 1 ≤ cell ≤ n − 3 on every axis: the moved addresses of the 8
   // octants its RowView reads (a uniform one expanded into `expanded` first).
