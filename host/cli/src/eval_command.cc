@@ -79,7 +79,7 @@ int RunEval(const EvalArgs& args) {
   // the clamp, and scoring there would measure the clamp. The default band (3) shrinks to fit.
   mesh::EvalOptions options;
   // (Evaluate refuses a wider band too; here it is refused before the truth is computed.)
-  const double exact = std::min(v.band_voxels, v.band_outside);
+  const double exact = mesh::ExactBandVoxels(v);
   options.band_voxels = args.band_given ? args.band_voxels : std::min(args.band_voxels, exact);
   if (options.band_voxels > exact) {
     fmt::print(stderr,

@@ -203,9 +203,8 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   if (!(options.band_voxels > 0) || options.band_voxels > truth.exact_within_voxels)
     return std::unexpected(Error{fmt::format("band {} voxels is outside (0, {}], where the truth is exact",
                                              options.band_voxels, truth.exact_within_voxels)});
-  // Stored φ is exact on [−band_voxels, +band_outside] (v1: its band both ways; v2: 6 and 2 by
-  // default); beyond, it is the clamp (or v2's free-space bound), and scoring there would score that.
-  if (options.band_voxels > std::min(field.band_voxels, field.band_outside))
+  // Beyond the exact band, scoring would score the clamp.
+  if (options.band_voxels > ExactBandVoxels(field))
     return std::unexpected(
         Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels inside, {} outside)",
                           options.band_voxels, field.band_voxels, field.band_outside)});

@@ -212,17 +212,23 @@ template <typename R, typename Use>
   }
 }
 
+template <typename R, typename Use>
+[[gnu::always_inline]] inline R TrilinearSampler::WithRowView(std::int32_t i, std::int32_t j, std::int32_t k,
+                                                              const Use& use) const {
+  std::array<std::uintptr_t, 8> moved;
+  alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded;
+  RowOctants(i, j, k, moved, expanded);
+  return WithRowView<R>(i, j, k, moved, use);
+}
+
 Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) const {
   Cell c;
   if (!Locate(x, y, z, c)) return Background();
   if (phi_ == nullptr) {
     if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
-    std::array<std::uintptr_t, 8> moved;
-    alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded;
-    RowOctants(c.i, c.j, c.k, moved, expanded);
     return WithRowView<Sample>(
-        c.i, c.j, c.k,
-        moved, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
+        c.i, c.j,
+        c.k, [&](const auto& v) __attribute__((always_inline)) { return InterpolateSmooth(v, c.fx, c.fy, c.fz); });
   }
   return InterpolateSmooth(FetchWide(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
@@ -230,7 +236,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) cons
 Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z, GradientCache& cache) const {
   if (phi_ != nullptr) return At(x, y, z);
   Cell c;
-  if (cache.cell == CacheCell(x, y, z) && cache.sampler == id_) {
+  if (Holds(cache, x, y, z)) {
     c = {x >> 16, y >> 16, z >> 16, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF};
   } else {
     if (!Locate(x, y, z, c)) return Background();
@@ -324,18 +330,14 @@ template <bool kCache>
 
 std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t z, PhiCache& cache) const {
   if (phi_ != nullptr) return Phi(x, y, z);
-  if (cache.cell == CacheCell(x, y, z) && cache.sampler == id_)
-    return InterpolatePhi<8>(cache.corners, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF);
+  if (Holds(cache, x, y, z)) return InterpolatePhi<8>(cache.corners, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF);
   return PhiStored<true>(x, y, z, &cache);
 }
 
 WideStencil TrilinearSampler::CopyWide(std::int32_t i, std::int32_t j, std::int32_t k) const {
   if (phi_ != nullptr) return Copy(FetchWide(i, j, k));
   if (FaceCell(i, j, k)) return Copy(FetchBricks(i, j, k));
-  std::array<std::uintptr_t, 8> moved;
-  alignas(16) std::array<std::array<std::int16_t, blob::kOctantNodes>, 8> expanded;
-  RowOctants(i, j, k, moved, expanded);
-  return WithRowView<WideStencil>(i, j, k, moved, [](const auto& v) { return Copy(v); });
+  return WithRowView<WideStencil>(i, j, k, [](const auto& v) { return Copy(v); });
 }
 
 }  // namespace palpa::sampler

@@ -9,6 +9,7 @@
 // Build the truth once and reuse it for every field on the same grid (same dims/origin/voxel).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <expected>
@@ -82,6 +83,11 @@ struct EvalResult {
   std::size_t gross_wrong_sign = 0;         ///< nodes with |true| > gross_beyond_voxels and the wrong sign
   double gross_wrong_sign_percent = 0;      ///< 100·gross_wrong_sign / nodes (ALL nodes)
 };
+
+/// Voxels from the surface within which `field`'s stored φ is exact: the smaller of its inside
+/// and outside bands (v1: its one band; v2: band_voxels and band_outside, 6 and 2 by default).
+/// Beyond, φ is the clamp (or v2's free-space bound).
+inline double ExactBandVoxels(const blob::FieldView& field) { return std::min(field.band_voxels, field.band_outside); }
 
 /// Scores `field` (v1, or v2 read in place) against a truth computed on the same grid (dims,
 /// origin and voxel must match exactly). Deterministic and independent of the thread count.

@@ -470,11 +470,18 @@ class TrilinearSampler {
   // Blob v2: the entry of node (i, j, k)'s octant: its brick's octant-table entry, or for a uniform
   // brick its index entry; either is an octant number or kSlotEmpty | φ.
   const std::uint32_t* OwnEntry(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    const std::uint32_t* slot = index_ + static_cast<std::ptrdiff_t>(i >> 3) * slot_stride_i_ +
-                                static_cast<std::ptrdiff_t>(j >> 3) * brick_dims_[2] + (k >> 3);
+    const std::uint32_t* slot = Slot(i, j, k);
     if ((*slot & blob::kSlotEmpty) != 0) return slot;
-    return tables_ + 8 * std::size_t{*slot} +
-           static_cast<std::size_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+    return tables_ + 8 * std::size_t{*slot} + OctantBits(i, j, k);
+  }
+  // Blob v2: the index entry of node (i, j, k)'s brick.
+  const std::uint32_t* Slot(std::int32_t i, std::int32_t j, std::int32_t k) const {
+    return index_ + static_cast<std::ptrdiff_t>(i >> 3) * slot_stride_i_ +
+           static_cast<std::ptrdiff_t>(j >> 3) * brick_dims_[2] + (k >> 3);
+  }
+  // Blob v2: node (i, j, k)'s octant in its brick, the octant-table entry 4·ox + 2·oy + oz.
+  static std::uint32_t OctantBits(std::int32_t i, std::int32_t j, std::int32_t k) {
+    return static_cast<std::uint32_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
   }
   // Blob v2: node (i, j, k) in stored octant number `octant`.
   const std::int16_t* OwnCorner(std::uint32_t octant, std::uint32_t local) const {
@@ -490,11 +497,10 @@ class TrilinearSampler {
   // entry's low half (its φ, little-endian) with a zero offset mask. Stored values, Q7.8.
   template <int Mask>
   [[gnu::always_inline]] Stencil SpillStencil(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    const std::uint32_t* own = index_ + static_cast<std::ptrdiff_t>(i >> 3) * slot_stride_i_ +
-                               static_cast<std::ptrdiff_t>(j >> 3) * brick_dims_[2] + (k >> 3);
+    const std::uint32_t* own = Slot(i, j, k);
     const std::ptrdiff_t next[3] = {(i & 4) != 0 ? slot_stride_i_ : 0, (j & 4) != 0 ? brick_dims_[2] : 0,
                                     (k & 4) != 0 ? 1 : 0};
-    const auto bits = static_cast<std::uint32_t>(((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1));
+    const std::uint32_t bits = OctantBits(i, j, k);
     const std::uint32_t local = Local(i, j, k);
     std::array<const std::int16_t*, 8> octant{};
     std::array<std::uint32_t, 8> mask{};
@@ -530,6 +536,12 @@ class TrilinearSampler {
            static_cast<std::uint64_t>(static_cast<std::uint16_t>(y >> 16)) << 16 |
            static_cast<std::uint64_t>(static_cast<std::uint16_t>(z >> 16));
   }
+  // Whether a cache filled by this sampler holds the cell of position (x, y, z) (its `cell` and
+  // `sampler` fields, as PhiCache and GradientCache both have them).
+  template <typename Cache>
+  [[gnu::always_inline]] bool Holds(const Cache& cache, std::int32_t x, std::int32_t y, std::int32_t z) const {
+    return cache.cell == CacheCell(x, y, z) && cache.sampler == id_;
+  }
   // The cache's `cell` of cell c as Locate found it (each index 0 .. 4094). Only these are cached: a position
   // whose CacheCell equals one lies inside that cell, below the grid's last node, at the fractions
   // given by its low 16 bits, exactly as Locate would place it (not so the last node itself, which
@@ -552,6 +564,9 @@ class TrilinearSampler {
   template <typename R, typename Use>
   R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const std::array<std::uintptr_t, 8>& moved,
                 const Use& use) const;
+  // The same on addresses looked up here (RowOctants into locals): At() and CopyWide() without a cache.
+  template <typename R, typename Use>
+  R WithRowView(std::int32_t i, std::int32_t j, std::int32_t k, const Use& use) const;
   // Whether the wide stencil of cell (i, j, k) repeats a face node (FetchBricks reads those).
   bool FaceCell(std::int32_t i, std::int32_t j, std::int32_t k) const {
     // One unsigned compare per axis: interior is 1 ≤ cell ≤ n − 3 (none when n < 4).
