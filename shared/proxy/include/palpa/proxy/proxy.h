@@ -93,7 +93,11 @@ struct ProxyState {
   bool grad_valid = false;
   GridPos last_hip;     ///< the HIP of the last tick (its speed decides the contact sample budget)
   bool seated = false;  ///< the HIP has been outside the object since the (re)start
-  bool valid = false;   ///< false: next tick starts the proxy at the HIP (start-up, reset)
+  /// An upper bound of |f| last tick, Q16.16 N (0 without contact): the next tick's force may rise
+  /// above it only by k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024, and falls by
+  /// max_force/1024 a tick while the proxy is held with the HIP outside (overpower fade).
+  std::int32_t pull_q16 = 0;
+  bool valid = false;  ///< false: next tick starts the proxy at the HIP (start-up, reset)
   /// Blob v2: the cells last sampled at the proxy and at the HIP (sampler::PhiCache), which a tick
   /// mostly samples again. They change how fast a sample is read, never its value, and record
   /// their sampler, so they need no reset (not even after a field swap).
@@ -145,6 +149,11 @@ struct TickResult {
 /// to max_force with its direction kept. A proxy started inside the object follows the HIP with
 /// zero force until the HIP has been outside once.
 TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+
+/// Eq. 10 alone: f = k·h·(proxy − hip), its magnitude clamped to max_force with its direction kept.
+/// Components (Q16.16 N) are rounded towards zero and |u| up, so Σ f_i² ≤ max_force² holds exactly
+/// in raw units (no overshoot by a bit). RT-safe.
+std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip);
 
 /// Passivity observer (Hannaford & Ryu 2002) for the sampled spring of eq. 10. Call Update once
 /// per tick with the tick's HIP and result. RT-safe, integer only.
