@@ -499,13 +499,18 @@ enum class Contact { kDone, kLeave, kContinue };
 // Eq. 10, f = k·h·(X_p − X_h), its magnitude limited to min(max_force, cap) with its direction
 // kept. Every component is rounded towards zero and |u| up (⌈√|u|²⌉), so |f| ≤ k·|u| and
 // |f| ≤ the limit hold exactly in integers: Σ f_i² ≤ limit². Returns an upper bound of |f|.
-[[gnu::noinline]] std::int64_t Force(const ProxyParams& params, GridPos p, GridPos h, std::int64_t cap, TickResult& r) {
-  const Vec u = Diff(p, h);  // |u_i| < 2^29.6
-  const std::int64_t k = params.k.value.raw();
-  const std::int64_t limit = std::min<std::int64_t>(params.max_force.value.raw(), cap);
+// ⌈|u|⌉ (< 2^31).
+std::int64_t CeilLength(const Vec& u) {
   const std::int64_t n2 = Norm2(u);
   auto len = static_cast<std::int64_t>(ISqrt(n2));
-  if (len * len < n2) ++len;  // ⌈|u|⌉ (< 2^31)
+  return len * len < n2 ? len + 1 : len;
+}
+
+[[gnu::noinline]] std::int64_t Force(const ProxyParams& params, const Vec& u, std::int64_t len, std::int64_t cap,
+                                     TickResult& r) {
+  // |u_i| < 2^29.6, len = ⌈|u|⌉
+  const std::int64_t k = params.k.value.raw();
+  const std::int64_t limit = std::min<std::int64_t>(params.max_force.value.raw(), cap);
   r.clamped = k * len > (limit << 16);
   std::int32_t any = 0;
   for (std::size_t a = 0; a < 3; ++a) {
@@ -553,6 +558,7 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
     state.seated = phi_start >= 0;
     state.valid = true;
     state.pull_q16 = 0;
+    state.hip_phi_bound_q16 = phi_start;
     r.proxy = h;
     r.iterations = 1;
     return r;
@@ -566,7 +572,18 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
          Pos(state.proxy), {state.phi, {state.grad[0], state.grad[1], state.grad[2]}, state.inv_grad2},
          state.grad_valid, phi_h, phi_h_known);
   // φ(X_h) every tick (outside the settle budget): the force holds only for a HIP inside or a
-  // blocked way, never for one outside with the way clear.
+  // blocked way, never for one outside with the way clear. In contact, an upper bound does when it
+  // shows the HIP inside: last tick's bound plus Λ·|ΔX_h| (the steady press and slide, no sample).
+  // The band's Λ serves: from an inside point, φ cannot reach 0 without first crossing cells that
+  // are not free space (φ ≤ 0 there), where the band's bound holds.
+  if (!t.phi_h_known && state.phi <= params.near_q16 && state.hip_phi_bound_q16 < 0) {
+    const std::int64_t up = (std::int64_t{state.hip_phi_bound_q16} << 16) +
+                            AxisVariation(Diff(h, state.last_hip), field.lipschitz_band()) + (kSlack << 16);
+    if (up < -(std::int64_t{1} << 16)) {
+      t.phi_h = -((-up) >> 16);  // rounded up: still an upper bound, < 0
+      t.phi_h_known = true;
+    }
+  }
   if (!t.phi_h_known) SamplePhiAtHip(t);
   // In free motion that sample is one of the budget (sphere tracing towards X_h needs it anyway);
   // at the surface it is one more.
@@ -593,11 +610,9 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
   }
 
   const GridPos p = ToGridPos(t.p);
-  // How far the spring's ends moved this tick (for the force's rise limit), before the state moves.
-  const auto hip_step = static_cast<std::int64_t>(ISqrt(Norm2(Diff(h, state.last_hip))));
-  const std::int64_t proxy_step =
-      std::min<std::int64_t>(std::int64_t{1} << 16, static_cast<std::int64_t>(ISqrt(Norm2(Diff(p, state.proxy)))));
+  const GridPos last_hip = state.last_hip, last_proxy = state.proxy;
   const std::int64_t last_pull = state.pull_q16;
+  state.hip_phi_bound_q16 = t.phi_h_known ? SaturateToInt32(t.phi_h) : std::numeric_limits<std::int32_t>::max();
   state.proxy = p;
   state.last_hip = h;
   state.phi = static_cast<std::int32_t>(t.at.phi);
@@ -622,13 +637,24 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
   const std::int64_t fade = params.max_force.value.raw() >> 10;
   const std::int64_t k = params.k.value.raw();
   const std::int64_t max_f = params.max_force.value.raw();
-  const std::int64_t cap =
-      inside_hip
-          ? std::min(max_f,
+  std::int64_t cap = std::max<std::int64_t>(0, last_pull - fade);
+  const Vec u = Diff(p, h);
+  const std::int64_t len = CeilLength(u);
+  if (inside_hip) {
+    cap = max_f;
+    // The spring's length bounds its force (k·⌈|u|⌉ ≥ |f|): within last_pull + fade the limit
+    // cannot bind, and the steady press or slide needs no roots for it.
+    if (k * len > ((last_pull + fade) << 16)) {
+      // How far the spring's ends moved this tick (the proxy's part at most a voxel).
+      const auto hip_step = static_cast<std::int64_t>(ISqrt(Norm2(Diff(h, last_hip))));
+      const std::int64_t proxy_step =
+          std::min<std::int64_t>(std::int64_t{1} << 16, static_cast<std::int64_t>(ISqrt(Norm2(Diff(p, last_proxy)))));
+      cap = std::min(max_f,
                      last_pull + fade +
-                         ((k * std::min<std::int64_t>(hip_step + proxy_step, std::int64_t{1} << 31) + 65535) >> 16))
-          : std::max<std::int64_t>(0, last_pull - fade);
-  state.pull_q16 = static_cast<std::int32_t>(Force(params, p, h, cap, r));
+                         ((k * std::min<std::int64_t>(hip_step + proxy_step, std::int64_t{1} << 31) + 65535) >> 16));
+    }
+  }
+  state.pull_q16 = static_cast<std::int32_t>(Force(params, u, len, cap, r));
   return r;
 }
 
@@ -646,6 +672,7 @@ namespace {
     state.last_hip = h;
     state.phi = phi_h;
     state.grad_valid = false;
+    state.hip_phi_bound_q16 = phi_h;
     TickResult r;
     r.proxy = h;
     r.iterations = 1;
@@ -683,7 +710,8 @@ TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& 
 
 std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip) {
   TickResult r;
-  Force(params, proxy, hip, params.max_force.value.raw(), r);
+  const Vec u = Diff(proxy, hip);
+  Force(params, u, CeilLength(u), params.max_force.value.raw(), r);
   return r.force;
 }
 

@@ -17,6 +17,7 @@
 #include <array>
 #include <cstdint>
 #include <expected>
+#include <limits>
 
 #include "palpa/blob/blob.h"
 #include "palpa/fixed/units.h"
@@ -97,6 +98,9 @@ struct ProxyState {
   /// above it only by k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024, and falls by
   /// max_force/1024 a tick while the proxy is held with the HIP outside (overpower fade).
   std::int32_t pull_q16 = 0;
+  /// An upper bound of φ(last_hip), Q16.16 (INT32_MAX: none). While it shows the HIP inside by
+  /// more than it can have moved (Λ·|ΔX_h|), a contact tick need not sample φ(X_h).
+  std::int32_t hip_phi_bound_q16 = std::numeric_limits<std::int32_t>::max();
   bool valid = false;  ///< false: next tick starts the proxy at the HIP (start-up, reset)
   /// Blob v2: the cells last sampled at the proxy and at the HIP (sampler::PhiCache), which a tick
   /// mostly samples again. They change how fast a sample is read, never its value, and record
