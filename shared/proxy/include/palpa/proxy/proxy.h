@@ -118,17 +118,18 @@ struct TickResult {
   bool contact = false;                   ///< a non-zero force: the surface holds the proxy from the HIP
   bool clamped = false;                   ///< |f| hit max_force
   bool converged = false;                 ///< eq. 9 reached its fixed point (update ≤ tolerance)
-  int iterations = 0;                     ///< field samples taken, ≤ max_iterations
+  int iterations = 0;                     ///< field samples at or towards the proxy, ≤ max_iterations (φ(X_h) apart)
 };
 
 /// One servo tick of the proxy (paper eq. 9, 10). RT-safe, bounded: at most max_iterations field
 /// samples and a fixed amount of arithmetic per sample.
 ///
 /// Invariant (the no-tunnelling guarantee): every point of the proxy's path, over all ticks, has
-/// φ > −δ, and the proxy rests only where φ ≥ −δ/2. Each move is a straight segment [a, b]
-/// accepted only if φ(a) + φ(b) + 2δ ≥ Λ·|b − a|, where Λ bounds |∇φ·(b−a)/|b−a|| over the whole
-/// grid (min of the field's Lipschitz norm and Σ|d_i|·max|∂_iφ|, see sampler::LipschitzBound):
-/// then φ ≥ (φ(a) + φ(b) − Λ|b−a|)/2 ≥ −δ all along it. A part whose interior reaches φ ≤ −δ
+/// φ > −3δ/2, and the proxy rests only where φ ≥ −δ (a contact move's end ≥ −δ/2). Each move is a
+/// straight segment [a, b] accepted only if φ(a) + φ(b) + 2δ_w ≥ Λ·|b − a| (δ_w = δ in free
+/// motion, 3δ/2 in contact and leaving), where Λ bounds |∇φ·(b−a)/|b−a|| over the whole grid (min
+/// of the field's Lipschitz norm and Σ|d_i|·max|∂_iφ|, see sampler::LipschitzBound): then
+/// φ ≥ (φ(a) + φ(b) − Λ|b−a|)/2 ≥ −δ_w all along it. A part whose interior reaches φ ≤ −3δ/2
 /// across its whole cross-section (a 2-voxel plate reaches −1/2) cannot be crossed.
 ///
 /// Free motion (φ(X_p) > 1/2 voxel): move to X_h without a sample if it lies in the ball where
@@ -143,15 +144,21 @@ struct TickResult {
 /// tangential one as φ(X_p) + 3δ/2 allows, each further piece 3δ/2/Λ more; every piece end is
 /// sampled and every piece certified, a failing piece ends the move (the next is halved). Caps:
 /// max_iterations samples (hard); the tick settles after settle_samples unless the proxy lags a
-/// fast HIP; gradient_samples of them read ∇φ. Convergence test: a move (or computed update) of
-/// |Δ|₁ ≤ tolerance ends the iteration. If the HIP is outside both the linearisation and the
-/// field, the proxy moves towards it instead (leaving contact).
+/// fast HIP; gradient_samples of them read ∇φ. Besides them, φ(X_h) once a tick (not while an
+/// upper bound shows the HIP inside). Convergence test: a move (or computed update) of
+/// |Δ|₁ ≤ tolerance ends the iteration. If the HIP is outside the field, the proxy marches towards
+/// it instead (leaving contact); the way is blocked only where a march end has φ < −δ (δ/2 deeper
+/// than any contact rest), and then the proxy is held and slides round the part.
 /// Friction (μs > 0, CHAI3D-style cone): the proxy sticks while its tangential offset from the
 /// HIP is ≤ μs × depth, and otherwise slides to the edge of the μd cone.
 /// Force (eq. 10): f = k·h·(X_p − X_h) when the proxy is at the surface (φ ≤ 1/2 voxel) and the
-/// HIP is behind it; zero otherwise (free space, or a proxy still catching up). Magnitude clamped
-/// to max_force with its direction kept. A proxy started inside the object follows the HIP with
-/// zero force until the HIP has been outside once.
+/// HIP is inside (φ(X_h) < 0) or the way to it is blocked; zero otherwise (free space, a clear
+/// way, or a proxy still catching up). Magnitude limited to max_force (components rounded towards
+/// zero: Σf² ≤ max² exactly), to last tick's + k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024
+/// (no step), and, held with the HIP outside, to last tick's − max_force/1024 (the overpower
+/// fade); direction kept. With the HIP inside, the proxy never leaves the near band (no drop).
+/// docs/realtime-core.md § Hold, release and overpower policy. A proxy started inside the object
+/// follows the HIP with zero force until the HIP has been outside once.
 TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
 
 /// Eq. 10 alone: f = k·h·(proxy − hip), its magnitude clamped to max_force with its direction kept.
