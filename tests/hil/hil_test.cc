@@ -187,6 +187,49 @@ TEST(Hil, RealHandInvariantsCanFail) {
   fs::remove_all(dir);
 }
 
+// Issue 19: `palpa build` says when a field touches its grid boundary (φ < 0 on a face): the open
+// plate (two sheets without a rim) does, the closed sphere does not.
+TEST(Hil, BuildWarnsWhenTheFieldTouchesItsGridBoundary) {
+  const std::string dir = TempDir("faces");
+  const std::string src = PALPA_SOURCE_DIR;
+  const Result plate = Palpa("build " + src + "/hil/fields/open-plate.xyz --fit 0.04 -q -o " + dir + "/plate.palpa");
+  EXPECT_EQ(plate.code, 0) << plate.out;
+  EXPECT_NE(plate.out.find("the field touches its grid boundary"), std::string::npos) << plate.out;
+  const Result sphere =
+      Palpa("build " + src + "/data/sphere926.pwn --scale 0.003 --cells 80 -q -o " + dir + "/s.palpa");
+  EXPECT_EQ(sphere.code, 0) << sphere.out;
+  EXPECT_EQ(sphere.out.find("grid boundary"), std::string::npos) << sphere.out;
+  fs::remove_all(dir);
+}
+
+// `palpa trace import`: a recording scaled uniformly about its bounding-box centre into the
+// workspace, the scaling and the note kept in the comment; one that does not fit is refused.
+TEST(Hil, TraceImportScalesARecordingIntoTheWorkspace) {
+  const std::string dir = TempDir("import");
+  {
+    std::ofstream csv(dir + "/rec.csv");
+    csv << "t_s,x_m,y_m,z_m\n";
+    for (int i = 0; i <= 100; ++i)  // 0.3 m along x around (1, 2, 3) m, 0.1 s at 1 kHz
+      csv << i * 0.001 << "," << 0.85 + 0.003 * i << ",2,3\n";
+  }
+  const Result ok = Palpa("trace import " + dir + "/rec.csv --scale 0.1 --offset 0,0,0.01 --note 'licence: test' -o " +
+                          dir + "/t.ptb");
+  ASSERT_EQ(ok.code, 0) << ok.out;
+  auto t = palpa::trace::ReadTraceFile(dir + "/t.ptb");
+  ASSERT_TRUE(t.has_value()) << t.error().message;
+  ASSERT_EQ(t->samples.size(), 101u);
+  EXPECT_NEAR(t->samples.front().hip_m[0], -0.015, 1e-9);  // (0.85 − 1.0) × 0.1
+  EXPECT_NEAR(t->samples.back().hip_m[0], 0.015, 1e-9);
+  EXPECT_NEAR(t->samples.back().hip_m[2], 0.01, 1e-9);
+  EXPECT_NE(t->info.comment.find("scaled uniformly by 0.1"), std::string::npos) << t->info.comment;
+  EXPECT_NE(t->info.comment.find("licence: test"), std::string::npos) << t->info.comment;
+  const Result big = Palpa("trace import " + dir + "/rec.csv --scale 1 -o " + dir + "/big.ptb");
+  EXPECT_EQ(big.code, 2) << big.out;
+  EXPECT_NE(big.out.find("choose a smaller --scale"), std::string::npos) << big.out;
+  EXPECT_FALSE(fs::exists(dir + "/big.ptb"));
+  fs::remove_all(dir);
+}
+
 TEST(Hil, BadCaseListsNameTheLine) {
   const std::string dir = TempDir("bad");
   std::ofstream(dir + "/cases.toml") << "[fields.a]\nbuild = \"build x.xyz\"\n[[case]]\nname = \"c\"\ntrace = \"t\"\n"
