@@ -14,6 +14,7 @@
 
 #include "atomic_file.h"
 #include "commands.h"
+#include "grid_faces.h"
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
 #include "palpa/field/point_io.h"
@@ -139,6 +140,11 @@ int RunBuild(const BuildArgs& args) {
   auto blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
   const std::span<std::int32_t> payload(blob_words.get() + kHeaderWords, nodes);
   built.field.WriteQ16(payload);
+  if (const std::size_t n = NegativeFaceNodes(std::span<const std::int32_t>(payload), g.dims); n > 0)
+    fmt::print(stderr,
+               "palpa build: warning: {}: the field touches its grid boundary (φ < 0 on {} face nodes); palpad treats "
+               "those faces as walls\n",
+               args.points, n);
   std::vector<std::byte> v2;
   if (args.format == 2) {
     // Blob v2: the dense values above, clamped to the asymmetric band and packed into bricks.
