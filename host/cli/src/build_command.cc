@@ -17,6 +17,7 @@
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
 #include "palpa/field/point_io.h"
+#include "palpa/field/samples.h"
 
 namespace palpa::cli {
 namespace {
@@ -69,6 +70,9 @@ std::uint32_t Crc32cFast(std::span<const std::byte> data, std::uint32_t crc) {
   return blob::Crc32c(data, crc);
 }
 
+// As field::BuildField's minimum.
+constexpr std::size_t kMinUsableSamples = 4;
+
 }  // namespace
 
 int RunBuild(const BuildArgs& args) {
@@ -78,10 +82,26 @@ int RunBuild(const BuildArgs& args) {
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                     static_cast<std::size_t>(args.threads));
 
-  auto points = field::ReadPoints(args.points);
+  // Degenerate samples are dropped here, after reading, and named (issue 20): a real scan with a
+  // few zero normals must not be refused whole. --strict refuses them.
+  auto points = field::ReadPoints(args.points, field::ReadOptions{.keep_bad_normals = true});
   if (!points) {
     fmt::print(stderr, "palpa build: {}\n", points.error().message);
     return kExitBadInput;
+  }
+  const field::DroppedSamples dropped = field::DropDegenerateSamples(*points, args.points);
+  if (dropped.Total() > 0) {
+    if (args.strict) {
+      fmt::print(stderr, "palpa build: {}: --strict: {}\n", args.points, dropped.Describe());
+      return kExitBadInput;
+    }
+    if (dropped.kept < kMinUsableSamples) {
+      fmt::print(stderr, "palpa build: {}: {} usable samples after dropping {}; at least {} are needed\n", args.points,
+                 dropped.kept, dropped.Describe(), kMinUsableSamples);
+      return kExitBadInput;
+    }
+    fmt::print(stderr, "palpa build: warning: {}: dropped {}; {} samples remain (--strict refuses such files)\n",
+               args.points, dropped.Describe(), dropped.kept);
   }
   const field::Transform transform =
       args.scale ? field::Transform{*args.scale, Eigen::Vector3d(args.offset_m[0], args.offset_m[1], args.offset_m[2])}
