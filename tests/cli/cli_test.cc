@@ -107,6 +107,39 @@ TEST_F(Cli, DegenerateSamplesAreDroppedAndNamed) {
   EXPECT_NE(n.out.find("nanpos.xyz:927: position is not finite"), std::string::npos) << n.out;
 }
 
+// Issue 20: a stray sample off the surface and a point at 1e30 are ignored, counted and named
+// (the farthest); the field is that of the file without them (compared through palpa export),
+// so neither makes solid of its own nor collapses --fit (the 1e30 point used to turn the grid
+// into 300 x 17 x 17 nodes, exit 0).
+TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string clean((std::istreambuf_iterator<char>(in)), {});
+  // sphere926 is radius 10 with ~1.2 between samples: 13 is 3 units off the surface, outward.
+  const std::string stray_in = Write("stray.xyz", clean + "13 0 0 1 0 0\n");
+  const std::string far_in = Write("far.xyz", clean + "1e30 1e30 1e30 0 0 1\n");
+  const std::string clean_in = Write("clean.xyz", clean);
+  const auto read = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  ASSERT_EQ(Palpa("build " + clean_in + " -o " + Path("clean.palpa") + " --cells 48 -q").code, 0);
+  ASSERT_EQ(Palpa("export " + Path("clean.palpa") + " --npy " + Path("clean.npy")).code, 0);
+  for (const std::string& input : {stray_in, far_in}) {
+    const Outcome b = Palpa("build " + input + " -o " + Path("x.palpa") + " --cells 48 -q");
+    ASSERT_EQ(b.code, 0) << b.out;
+    EXPECT_NE(b.out.find("ignored 1 sample that its neighbours do not support (off their surface or isolated); "
+                         "the farthest: " +
+                         input + ":927"),
+              std::string::npos)
+        << b.out;
+    ASSERT_EQ(Palpa("export " + Path("x.palpa") + " --npy " + Path("x.npy")).code, 0);
+    EXPECT_EQ(read(Path("x.npy")), read(Path("clean.npy"))) << input;
+  }
+  // The clean file has none.
+  const Outcome c = Palpa("build " + clean_in + " -o " + Path("c.palpa") + " --cells 48 -q");
+  EXPECT_EQ(c.out.find("ignored"), std::string::npos) << c.out;
+}
+
 TEST_F(Cli, FailedBuildKeepsThePreviousOutput) {
   const std::string out = Path("field.palpa");
   ASSERT_EQ(Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + out + " --cells 40 -q").code, 0);

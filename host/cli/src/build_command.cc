@@ -103,6 +103,18 @@ int RunBuild(const BuildArgs& args) {
     fmt::print(stderr, "palpa build: warning: {}: dropped {}; {} samples remain (--strict refuses such files)\n",
                args.points, dropped.Describe(), dropped.kept);
   }
+  // Stray samples and outliers are ignored before the fit (one point at 1e30 must not collapse
+  // --fit) and before the build (each would make solid of its own: a phantom wall).
+  const field::StraySamples stray = field::FindStraySamples(points->positions, points->normals);
+  if (!stray.indices.empty()) {
+    fmt::print(stderr,
+               "palpa build: warning: {}: ignored {} sample{} that {} neighbours do not support (off their "
+               "surface or isolated); the farthest: {}, {:.3g} sample spacings off\n",
+               args.points, stray.indices.size(), stray.indices.size() == 1 ? "" : "s",
+               stray.indices.size() == 1 ? "its" : "their", field::PointPlace(args.points, *points, *stray.farthest),
+               stray.farthest_spacings);
+    field::RemoveSamples(*points, stray.indices);
+  }
   const field::Transform transform =
       args.scale ? field::Transform{*args.scale, Eigen::Vector3d(args.offset_m[0], args.offset_m[1], args.offset_m[2])}
                  : field::FitTransform(*points, args.fit_m);

@@ -8,6 +8,9 @@
 #include <expected>
 #include <optional>
 #include <string>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "palpa/field/error.h"
 #include "palpa/field/point_io.h"
@@ -36,5 +39,33 @@ struct DroppedSamples {
 /// rest; `points.lines` follows. `file` names the points' file in the places (PointPlace).
 /// O(n log n). Positions must be finite (ReadPoints ensures it).
 DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file);
+
+/// Samples their neighbours do not support (issue 20): a stray point off the surface, or an
+/// outlier in free space. Each one's inner balls and patch would otherwise make solid where
+/// there is none (a phantom wall), and one far point would collapse `--fit`.
+struct StraySamples {
+  std::vector<std::size_t> indices;        ///< ascending, into the positions given
+  std::optional<std::size_t> farthest;     ///< the one farthest off its neighbours' surface
+  double farthest_spacings = 0;            ///< how far, in typical sample spacings
+  double spacing = 0;                      ///< the typical spacing: median distance to the 8th neighbour
+};
+
+/// Finds the stray samples, scale-free (model units are fine: nothing depends on the units).
+/// With s the median distance to the 8th nearest sample, for each sample P (unit normal n) the
+/// plane of its 16 nearest others (centroid c, normal v: least squares, the smallest principal
+/// axis) gives the offset d = |v . (P - c)| and the neighbours' own RMS offset r. P is stray when
+///   d > 4 r + s / 2  (off the local surface by more than 4x its noise and half a spacing), or
+///   its nearest other sample is more than 1.5 s away (isolated: ~4 typical nearest gaps; an
+///   outlier inside a tube lies on its neighbours' mean plane but far from all of them), or
+///   fewer than 4 of the 16 neighbours' normals have a positive dot product with n (a random or
+///   flipped normal; on a sharp edge or a thin wall at least the samples of its own face agree).
+/// Noise, curvature, sharp edges and thin walls raise r with d (noise of 1 voxel per axis keeps
+/// d under ~3 r); open rims lie on their plane. Deterministic, parallel; O(n log n). Needs at
+/// least 17 samples (fewer: none is stray).
+StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
+                              const std::vector<Eigen::Vector3d>& normals);
+
+/// Removes `indices` (ascending) from points (positions, normals, and lines when present).
+void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices);
 
 }  // namespace palpa::field
