@@ -140,12 +140,18 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
       const Eigen::Vector3d v = eig.eigenvectors().col(0);  // smallest eigenvalue first
       const double rms = std::sqrt(std::max(eig.eigenvalues()[0], 0.0) / static_cast<double>(kPlaneNeighbours));
       const double offset = std::abs(v.dot(positions[i] - c));
+      // The spacing where P is: the median of its neighbours' own (a sparse region of a real scan
+      // is not an outlier; a sample far from a normally dense surface is).
+      std::array<double, kPlaneNeighbours> around{};
+      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) around[m] = spacing[nb[i * kPlaneNeighbours + m]];
+      std::nth_element(around.begin(), around.begin() + kPlaneNeighbours / 2, around.end());
+      const double local = std::max(around[kPlaneNeighbours / 2], s);
       std::size_t agree = 0;
       for (std::size_t m = 0; m < kPlaneNeighbours; ++m)
         if (normals[nb[i * kPlaneNeighbours + m]].dot(normals[i]) > 0.0) ++agree;
-      if (offset > kNoiseFactor * rms + kOffsetSpacings * s || nearest[i] > kIsolatedSpacings * s ||
+      if (offset > kNoiseFactor * rms + kOffsetSpacings * local || nearest[i] > kIsolatedSpacings * local ||
           agree < kMinAgreeing)
-        excess[i] = std::max(offset, nearest[i]) / s;
+        excess[i] = std::max(offset, nearest[i]) / local;
     }
   });
   for (std::size_t i = 0; i < n; ++i) {

@@ -46,22 +46,24 @@ DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file);
 struct StraySamples {
   std::vector<std::size_t> indices;        ///< ascending, into the positions given
   std::optional<std::size_t> farthest;     ///< the one farthest off its neighbours' surface
-  double farthest_spacings = 0;            ///< how far, in typical sample spacings
-  double spacing = 0;                      ///< the typical spacing: median distance to the 8th neighbour
+  double farthest_spacings = 0;            ///< how far (offset or nearest gap), in local spacings
+  double spacing = 0;                      ///< median distance to the 8th neighbour, all samples
 };
 
 /// Finds the stray samples, scale-free (model units are fine: nothing depends on the units).
-/// With s the median distance to the 8th nearest sample, for each sample P (unit normal n) the
-/// plane of its 16 nearest others (centroid c, normal v: least squares, the smallest principal
-/// axis) gives the offset d = |v . (P - c)| and the neighbours' own RMS offset r. P is stray when
+/// For each sample P (unit normal n): its 16 nearest others, their least-squares plane (centroid
+/// c, normal v: the smallest principal axis), P's offset d = |v . (P - c)|, the neighbours' own
+/// RMS offset r, and the local spacing s: the median over the neighbours of their distance to
+/// their 8th nearest sample, but at least the median of that over all samples (a dense ring of a
+/// regular lattice must not make s small). P is stray when
 ///   d > 4 r + s / 2  (off the local surface by more than 4x its noise and half a spacing), or
 ///   its nearest other sample is more than 1.5 s away (isolated: ~4 typical nearest gaps; an
 ///   outlier inside a tube lies on its neighbours' mean plane but far from all of them), or
 ///   fewer than 4 of the 16 neighbours' normals have a positive dot product with n (a random or
 ///   flipped normal; on a sharp edge or a thin wall at least the samples of its own face agree).
 /// Noise, curvature, sharp edges and thin walls raise r with d (noise of 1 voxel per axis keeps
-/// d under ~3 r); open rims lie on their plane. Deterministic, parallel; O(n log n). Needs at
-/// least 17 samples (fewer: none is stray).
+/// d under ~3 r); open rims lie on their plane; a sparse region has a large s. Deterministic,
+/// parallel; O(n log n). Needs at least 17 samples (fewer: none is stray).
 StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
                               const std::vector<Eigen::Vector3d>& normals);
 
