@@ -35,7 +35,7 @@ constexpr int kBlendPatches = 4;
 // the closing surface of an open scan by several voxels).
 constexpr int kAreaNeighbours = 16;
 constexpr float kWindingSure = 0.3f;    // w below (1 - above) this at all 8 brick corners: sure
-constexpr float kClampedSlack = 1e-3f;  // a node this close to +-band was clamped  // SampleSpacing's default: the k of the winding number's areas
+constexpr float kClampedSlack = 1e-3f;  // a node this close to +-band was clamped
 // Samples considered per 8^3 brick: the nearest to its centre. They hold every node's few nearest
 // samples, and their balls form the bracket (any subset of the balls gives valid bounds).
 constexpr std::size_t kBrickCandidates = 48;

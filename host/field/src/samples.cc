@@ -7,10 +7,10 @@
 #include <numeric>
 #include <vector>
 
+#include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <Eigen/Eigenvalues>
-#include <fmt/format.h>
 
 #include "point_cloud.h"
 

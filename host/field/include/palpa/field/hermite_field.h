@@ -58,10 +58,10 @@ struct HermiteOptions {
 struct HermiteStats {
   std::size_t inner_balls_shrunk = 0;  // by the leak guard
   std::size_t outer_balls_shrunk = 0;
-  std::size_t bricks_evaluated = 0;      // including bricks_added
-  std::size_t bricks_added = 0;          // evaluated because a neighbour's face was below band - 1
-  std::size_t label_minority_votes = 0;  // winding_labels = false only: LabelUnallocatedBricks' minority
-  std::size_t winding_bricks = 0;        // unevaluated bricks holding w = 1/2, given values from w
+  std::size_t bricks_evaluated = 0;       // including bricks_added
+  std::size_t bricks_added = 0;           // evaluated because a neighbour's face was below band - 1
+  std::size_t label_minority_votes = 0;   // winding_labels = false only: LabelUnallocatedBricks' minority
+  std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
   SparseField::LipschitzStats lipschitz;

@@ -44,10 +44,10 @@ DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file);
 /// outlier in free space. Each one's inner balls and patch would otherwise make solid where
 /// there is none (a phantom wall), and one far point would collapse `--fit`.
 struct StraySamples {
-  std::vector<std::size_t> indices;        ///< ascending, into the positions given
-  std::optional<std::size_t> farthest;     ///< the one farthest off its neighbours' surface
-  double farthest_spacings = 0;            ///< how far (offset or nearest gap), in local spacings
-  double spacing = 0;                      ///< median distance to the 8th neighbour, all samples
+  std::vector<std::size_t> indices;     ///< ascending, into the positions given
+  std::optional<std::size_t> farthest;  ///< the one farthest off its neighbours' surface
+  double farthest_spacings = 0;         ///< how far (offset or nearest gap), in local spacings
+  double spacing = 0;                   ///< median distance to the 8th neighbour, all samples
 };
 
 /// Finds the stray samples, scale-free (model units are fine: nothing depends on the units).
