@@ -94,7 +94,9 @@ constexpr std::size_t kSpacingNeighbour = 8;
 constexpr double kNoiseFactor = 4.0;
 constexpr double kOffsetSpacings = 0.5;
 constexpr double kIsolatedSpacings = 1.5;
-constexpr std::size_t kMinAgreeing = 4;  // of kPlaneNeighbours
+constexpr std::size_t kMinAgreeing = 4;   // of kPlaneNeighbours
+constexpr double kSparseSpacings = 3.0;   // 16th neighbour (~1.4 s on a surface, ~2 s on a rim)
+constexpr double kMaxLocalSpacing = 2.0;  // x the global: outliers among outliers are not a sparse region
 }  // namespace
 
 StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
@@ -107,7 +109,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
   // Neighbours of every sample, without itself (an exact duplicate may come first instead: same
   // position, so it makes no difference to the plane).
   std::vector<std::size_t> nb(n * kPlaneNeighbours);
-  std::vector<double> spacing(n), nearest(n);
+  std::vector<double> spacing(n), nearest(n), farthest(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::array<std::size_t, kPlaneNeighbours + 1> idx{};
     std::array<double, kPlaneNeighbours + 1> d2{};
@@ -118,6 +120,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
         if (idx[t] != i) nb[i * kPlaneNeighbours + m++] = idx[t];
       spacing[i] = std::sqrt(d2[kSpacingNeighbour]);
       nearest[i] = std::sqrt(d2[1]);
+      farthest[i] = std::sqrt(d2[kPlaneNeighbours]);
     }
   });
   std::vector<double> sorted = spacing;
@@ -145,12 +148,12 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
       std::array<double, kPlaneNeighbours> around{};
       for (std::size_t m = 0; m < kPlaneNeighbours; ++m) around[m] = spacing[nb[i * kPlaneNeighbours + m]];
       std::nth_element(around.begin(), around.begin() + kPlaneNeighbours / 2, around.end());
-      const double local = std::max(around[kPlaneNeighbours / 2], s);
+      const double local = std::clamp(around[kPlaneNeighbours / 2], s, kMaxLocalSpacing * s);
       std::size_t agree = 0;
       for (std::size_t m = 0; m < kPlaneNeighbours; ++m)
         if (normals[nb[i * kPlaneNeighbours + m]].dot(normals[i]) > 0.0) ++agree;
       if (offset > kNoiseFactor * rms + kOffsetSpacings * local || nearest[i] > kIsolatedSpacings * local ||
-          agree < kMinAgreeing)
+          farthest[i] > kSparseSpacings * local || agree < kMinAgreeing)
         excess[i] = std::max(offset, nearest[i]) / local;
     }
   });

@@ -54,11 +54,14 @@ struct StraySamples {
 /// For each sample P (unit normal n): its 16 nearest others, their least-squares plane (centroid
 /// c, normal v: the smallest principal axis), P's offset d = |v . (P - c)|, the neighbours' own
 /// RMS offset r, and the local spacing s: the median over the neighbours of their distance to
-/// their 8th nearest sample, but at least the median of that over all samples (a dense ring of a
-/// regular lattice must not make s small). P is stray when
+/// their 8th nearest sample, clamped to [1, 2] x the median of that over all samples (a dense
+/// ring of a regular lattice must not make s small, nor a crowd of outliers large).
+/// P is stray when
 ///   d > 4 r + s / 2  (off the local surface by more than 4x its noise and half a spacing), or
 ///   its nearest other sample is more than 1.5 s away (isolated: ~4 typical nearest gaps; an
 ///   outlier inside a tube lies on its neighbours' mean plane but far from all of them), or
+///   its 16th nearest is more than 3 s away (~1.4 s on a surface, ~2 s on an open rim: a pair
+///   of outliers is not isolated, but its 16 neighbours are spread over a large region), or
 ///   fewer than 4 of the 16 neighbours' normals have a positive dot product with n (a random or
 ///   flipped normal; on a sharp edge or a thin wall at least the samples of its own face agree).
 /// Noise, curvature, sharp edges and thin walls raise r with d (noise of 1 voxel per axis keeps
