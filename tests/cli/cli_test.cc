@@ -140,6 +140,25 @@ TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
   EXPECT_EQ(c.out.find("ignored"), std::string::npos) << c.out;
 }
 
+// Issue 20: an open scan is reported open (with the area the field closed), a closed one is not.
+TEST_F(Cli, OpenScanIsReportedOpen) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string cap;
+  for (std::string line; std::getline(in, line);) {
+    double x = 0, y = 0, z = 0;
+    if (std::sscanf(line.c_str(), "%lf %lf %lf", &x, &y, &z) == 3 && z > 0) cap += line + "\n";
+  }
+  const std::string cap_in = Write("cap.xyz", cap);
+  const Outcome open = Palpa("build " + cap_in + " -o " + Path("cap.palpa") + " --cells 64 -q");
+  ASSERT_EQ(open.code, 0) << open.out;
+  EXPECT_NE(open.out.find("the scan is open (the normals are not to blame)"), std::string::npos) << open.out;
+  EXPECT_EQ(open.out.find("not consistently oriented"), std::string::npos) << open.out;
+  const Outcome closed =
+      Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + Path("s.palpa") + " --cells 64 -q");
+  ASSERT_EQ(closed.code, 0) << closed.out;
+  EXPECT_EQ(closed.out.find("open"), std::string::npos) << closed.out;
+}
+
 TEST_F(Cli, FailedBuildKeepsThePreviousOutput) {
   const std::string out = Path("field.palpa");
   ASSERT_EQ(Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + out + " --cells 40 -q").code, 0);

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <fmt/core.h>
@@ -147,6 +148,22 @@ int RunBuild(const BuildArgs& args) {
                args.points, built.orientation.Describe());
   }
 
+  // Issue 20: say when the scan is open (the winding number closed a surface where no sample
+  // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
+  {
+    const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+    const double closed = built.hermite.closed_area_m2 / (transform.scale * transform.scale);  // model units^2
+    if (built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0) {
+      fmt::print(
+          stderr,
+          "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it by the "
+          "winding number of the samples over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
+          args.points, built.hermite.closed_area_m2 * 1e6, closed,
+          built.hermite.face_nodes_closed > 0
+              ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
+              : std::string());
+    }
+  }
   const field::GridSpec& g = built.field.grid();
   blob::BlobMeta meta;
   for (std::size_t a = 0; a < 3; ++a) {

@@ -64,6 +64,10 @@ struct HermiteStats {
   std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
+  // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
+  // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
+  // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.
+  double closed_area_m2 = 0.0;
   SparseField::LipschitzStats lipschitz;
   Packing inner;                  // guarded, metres
   Packing outer;                  // guarded, metres (balls outside the object)
