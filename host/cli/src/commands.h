@@ -29,6 +29,7 @@ struct BuildArgs {
   std::string method = "erosion";
   int threads = 0;  ///< 0: all cores
   bool quiet = false;
+  bool strict = false;  ///< refuse degenerate samples instead of dropping them (issue 20)
 };
 int RunBuild(const BuildArgs& args);
 

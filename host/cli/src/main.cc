@@ -56,6 +56,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
   build->add_flag("-q,--quiet", b.quiet, "No report on stdout");
+  build->add_flag("--strict", b.strict,
+                  "Refuse a point file with any zero-length or non-finite normal or exact duplicate (default: "
+                  "drop them and say so)");
 
   std::string info_field;
   bool info_json = false;

@@ -45,9 +45,24 @@ std::expected<PointSet, Error> AtLeastFour(const std::string& name, PointSet poi
   return points;
 }
 
+// AddOrientedPoint, except that a bad normal is kept as (0, 0, 0) (ReadOptions::keep_bad_normals).
+std::optional<std::string> AddPointKeepingBadNormal(PointSet& points, const Eigen::Vector3d& p,
+                                                    const Eigen::Vector3d& n) {
+  if (!p.allFinite()) return "position is not finite";
+  if (n.allFinite() && n.cwiseAbs().maxCoeff() > 0.0) return detail::AddOrientedPoint(points, p, n);
+  points.positions.push_back(p);
+  points.normals.push_back(Eigen::Vector3d::Zero());
+  return std::nullopt;
+}
+
 }  // namespace
 
-std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
+std::string PointPlace(const std::string& file, const PointSet& points, std::size_t index) {
+  if (index < points.lines.size()) return fmt::format("{}:{}", file, points.lines[index]);
+  return fmt::format("{}: vertex {}", file, index);
+}
+
+std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, const ReadOptions& options) {
   const std::string name = path.string();
   const std::string ext = Lower(path.extension().string());
   if (ext != ".xyz" && ext != ".pwn" && ext != ".ply") {
@@ -68,8 +83,8 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
   }
   if (ext == ".ply") {
     PointSet points;
-    if (auto error = detail::ReadPly(name, text, detail::AddOrientedPoint, points))
-      return std::unexpected(Error{std::move(*error)});
+    const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
+    if (auto error = detail::ReadPly(name, text, add, points)) return std::unexpected(Error{std::move(*error)});
     return AtLeastFour(name, std::move(points));
   }
 
@@ -109,9 +124,11 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
     const Eigen::Vector3d n(values[3], values[4], values[5]);
-    if (auto bad = detail::AddOrientedPoint(points, p, n)) {
+    const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
+    if (auto bad = add(points, p, n)) {
       return std::unexpected(Error{fmt::format("{}:{}: {}", name, line_number, *bad)});
     }
+    if (options.keep_bad_normals) points.lines.push_back(line_number);
   }
   return AtLeastFour(name, std::move(points));
 }
