@@ -8,10 +8,15 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -139,6 +144,10 @@ class Palpad {
                                      "300",
                                      "--overrun-limit",
                                      "0"};
+    if (std::find(extra.begin(), extra.end(), "--net-timeout-ms") != extra.end()) {  // the test's own deadline
+      const auto own = std::find(args.begin(), args.end(), "--net-timeout-ms");
+      args.erase(own, own + 2);
+    }
     for (auto& e : extra) args.push_back(e);
     std::vector<char*> argv;
     for (auto& s : args) argv.push_back(s.data());
@@ -565,6 +574,52 @@ TEST(UploadProcess, ThousandSwapsWhileInContactNeverStepTheForce) {
   EXPECT_GT(contact_share, 0.5) << "the trace must be in contact most of the time";
   EXPECT_GT(loaded_swaps, 100u) << "many swaps must happen under load, or the bound proves nothing";
   EXPECT_LE(max_step, bound);
+}
+
+// Issue 18, finding 9: 200 unauthenticated clients that send 1 byte a second used to hold the
+// listener one at a time for their whole header deadline, locking out every status and upload.
+// Now each connection has its own worker and deadline: a status is answered while all 200 are
+// still connected. The latency is printed (not asserted tightly: the machine is noisy); the
+// bound, 4 s, is below the 5 s header deadline that served the first slow client before.
+TEST(UploadProcess, StatusIsAnsweredWhileTwoHundredSlowClientsAreConnected) {
+  const Inputs& in = Shared();
+  Palpad p("slow", {"--net-timeout-ms", "5000"});
+  ASSERT_NE(p.port(), 0) << p.log();
+  constexpr int kSlow = 200;
+  std::vector<Socket> slow;
+  for (int i = 0; i < kSlow; ++i) {
+    auto s = ConnectTcp("127.0.0.1", p.port(), NowNs() + 5'000'000'000);
+    ASSERT_TRUE(s.has_value()) << s.error();
+    slow.push_back(std::move(*s));
+  }
+  std::atomic<bool> stop{false};
+  std::thread drip([&] {  // one byte of a valid magic per client per second
+    const char magic[] = {'P', 'L', 'P', 'U'};
+    for (int second = 0; !stop.load(); ++second) {
+      const auto b = static_cast<std::byte>(magic[second % 4]);
+      for (Socket& s : slow) (void)send(s.fd(), &b, 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+      for (int i = 0; i < 20 && !stop.load(); ++i) std::this_thread::sleep_for(50ms);
+    }
+  });
+  std::this_thread::sleep_for(1500ms);  // every slow client has sent its first bytes
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto st = FetchStatus(p.endpoint(), in.k, 4000ms);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  int still_open = 0;  // read what the server sent (its HELLO); EAGAIN then means no EOF yet
+  for (Socket& s : slow) {
+    std::array<char, 512> buf{};
+    ssize_t n = 0;
+    while ((n = recv(s.fd(), buf.data(), buf.size(), MSG_DONTWAIT)) > 0) {
+    }
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) ++still_open;
+  }
+  stop = true;
+  drip.join();
+  std::printf("status answered in %.1f ms with %d slow clients connected (%d still open after it)\n", ms, kSlow,
+              still_open);
+  ASSERT_TRUE(st.has_value()) << st.error().message << "\n" << p.log();
+  EXPECT_EQ(still_open, kSlow);  // served while every slow client was connected: none refused or evicted yet
+  EXPECT_LT(ms, 4000.0);
 }
 
 }  // namespace
