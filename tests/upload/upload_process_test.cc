@@ -622,5 +622,55 @@ TEST(UploadProcess, StatusIsAnsweredWhileTwoHundredSlowClientsAreConnected) {
   EXPECT_LT(ms, 4000.0);
 }
 
+// Issue 18, finding 11: a recorded reply, replayed to a later request, verifies under the key
+// but answers other nonces. The client used to call that "wrong key?", which sends the operator
+// to rotate a good key; it now says it is a replayed or stale answer. A relay between the client
+// and palpad records the first status reply and plays it back to the second request.
+TEST(UploadProcess, AReplayedReplyIsReportedAsAReplayNotAWrongKey) {
+  const Inputs& in = Shared();
+  Palpad p("replay");
+  ASSERT_NE(p.port(), 0) << p.log();
+  auto relay = ListenTcp("127.0.0.1", 0);
+  ASSERT_TRUE(relay.has_value()) << relay.error();
+  const std::uint16_t relay_port = LocalPort(relay->fd());
+  constexpr std::size_t kHello = kHeaderSize + sizeof(HelloBody) + kTagBytes;
+  constexpr std::size_t kRequest = kHeaderSize + kTagBytes;
+  constexpr std::size_t kReply = kHeaderSize + sizeof(StatusBody) + kTagBytes;
+  std::thread man_in_the_middle([&] {
+    std::vector<std::byte> recorded(kReply);
+    for (int session = 0; session < 2; ++session) {
+      const int c = accept(relay->fd(), nullptr, nullptr);
+      if (c < 0) return;
+      Socket client(c);
+      auto up = ConnectTcp("127.0.0.1", p.port(), NowNs() + 2'000'000'000);
+      if (!up) return;
+      const std::int64_t deadline = NowNs() + 3'000'000'000;
+      std::vector<std::byte> hello(kHello), request(kRequest), reply(kReply);
+      std::size_t got = 0;
+      if (RecvAll(up->fd(), hello, deadline, 0, got) != IoResult::kOk ||
+          SendAll(client.fd(), hello, deadline) != IoResult::kOk ||
+          RecvAll(client.fd(), request, deadline, 0, got) != IoResult::kOk)
+        return;
+      if (session == 0) {  // relay honestly, and keep the reply
+        if (SendAll(up->fd(), request, deadline) != IoResult::kOk ||
+            RecvAll(up->fd(), reply, deadline, 0, got) != IoResult::kOk)
+          return;
+        recorded = reply;
+      }
+      (void)SendAll(client.fd(), recorded, deadline);  // session 1: the old reply, not palpad's
+    }
+  });
+  const Endpoint via{"127.0.0.1", relay_port};
+  const auto first = FetchStatus(via, in.k, 3000ms);
+  const auto second = FetchStatus(via, in.k, 3000ms);
+  man_in_the_middle.join();
+  ASSERT_TRUE(first.has_value()) << first.error().message;
+  ASSERT_FALSE(second.has_value());
+  EXPECT_EQ(second.error().code, NetErrorCode::kBadReply);
+  EXPECT_NE(second.error().message.find("belongs to another exchange"), std::string::npos) << second.error().message;
+  EXPECT_NE(second.error().message.find("replayed or stale answer"), std::string::npos) << second.error().message;
+  EXPECT_EQ(second.error().message.find("wrong key"), std::string::npos) << second.error().message;
+}
+
 }  // namespace
 }  // namespace palpa::net

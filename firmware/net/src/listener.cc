@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -339,8 +340,10 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer, std::atom
   }
 
   // UPLOAD: the header passed; one upload at a time owns the spare buffer.
-  std::unique_lock<std::mutex> upload_lock(upload_mutex_, std::try_to_lock);
-  if (!upload_lock.owns_lock())
+  // A finishing upload (its reply, a refusal's linger) releases it within ms; a running one may
+  // take long: wait up to the header deadline, then refuse.
+  std::unique_lock<std::timed_mutex> upload_lock(upload_mutex_, std::defer_lock);
+  if (!upload_lock.try_lock_for(std::chrono::milliseconds(config_.read_timeout_ms)))
     return refuse(net::Refusal::kBusy, "busy: another upload is in progress; try again when it has finished");
   // Ask for the body, then read it into the spare buffer.
   const std::size_t spare = 1 - in_use_.load(std::memory_order_acquire);
@@ -414,6 +417,7 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer, std::atom
   b.voxel_m = dst.voxel_m;
   b.swaps = swaps;
   b.field_bytes = size;
+  upload_lock.unlock();  // swapped and copied: the next upload may start while this reply goes out
   reply(net::MessageType::kUploadAccepted, Bytes(b));
 }
 

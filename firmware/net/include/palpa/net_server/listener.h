@@ -9,7 +9,8 @@
 //     answering; only then does the old buffer become the spare. A refused or failed upload never
 //     touches the field in use.
 // Every refusal is logged as one line and sent to the client with the same sentence. Uploads are
-// one at a time (there is one spare buffer): a second one meanwhile is refused "busy". When all
+// one at a time (there is one spare buffer): a second one waits up to read_timeout_ms, then is
+// refused "busy". When all
 // kMaxConnections slots are taken, the oldest connection that has not yet authenticated its
 // request is closed to make room (its worker ends at once); if every slot is authenticated, the
 // new connection is closed unanswered.
@@ -128,7 +129,7 @@ class UploadListener {
   std::array<Buffer, 2> buffers_;
   std::atomic<std::size_t> in_use_{0};  // the buffer the loop reads; the other is the spare
   std::mutex meta_mutex_;               // the Buffer fields other than data/field, read by STATUS workers
-  std::mutex upload_mutex_;             // one upload at a time (one spare buffer)
+  std::timed_mutex upload_mutex_;       // one upload at a time (one spare buffer)
   std::unique_ptr<Slot[]> slots_;
   std::atomic<std::uint64_t> evicted_{0};
   servo::ServoLoop* loop_ = nullptr;
