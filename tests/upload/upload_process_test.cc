@@ -622,6 +622,29 @@ TEST(UploadProcess, StatusIsAnsweredWhileTwoHundredSlowClientsAreConnected) {
   EXPECT_LT(ms, 4000.0);
 }
 
+// Past the cap (256 connections), the oldest unauthenticated connection is closed for the newest:
+// 300 idle clients, then a status, which is answered, and palpad logs each eviction.
+TEST(UploadProcess, PastTheConnectionCapTheOldestUnauthenticatedIsEvicted) {
+  const Inputs& in = Shared();
+  Palpad p("cap", {"--net-timeout-ms", "5000"});
+  ASSERT_NE(p.port(), 0) << p.log();
+  constexpr int kIdle = 300;
+  std::vector<Socket> idle;
+  for (int i = 0; i < kIdle; ++i) {
+    auto s = ConnectTcp("127.0.0.1", p.port(), NowNs() + 5'000'000'000);
+    ASSERT_TRUE(s.has_value()) << s.error();
+    idle.push_back(std::move(*s));
+  }
+  const auto st = FetchStatus(p.endpoint(), in.k, 4000ms);
+  ASSERT_TRUE(st.has_value()) << st.error().message << "\n" << p.log();
+  const std::string log = p.log();
+  std::size_t evictions = 0;
+  for (std::size_t at = log.find("256 connections open, it was the oldest one not yet authenticated");
+       at != std::string::npos; at = log.find("it was the oldest one not yet authenticated", at + 1))
+    ++evictions;
+  EXPECT_GE(evictions, static_cast<std::size_t>(kIdle + 1 - 256)) << log;
+}
+
 // Issue 18, finding 11: a recorded reply, replayed to a later request, verifies under the key
 // but answers other nonces. The client used to call that "wrong key?", which sends the operator
 // to rotate a good key; it now says it is a replayed or stale answer. A relay between the client
