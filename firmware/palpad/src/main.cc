@@ -290,7 +290,9 @@ int Run(const palpa::palpad::Options& o) {
   const palpa::servo::RunEnd end = loop.Run(o.fast, o.rate_hz);
   loop_running.store(false, std::memory_order_release);
 
-  // After the run: non-RT again.
+  // After the run: non-RT again. The device first: zero torque and its report before any output
+  // is committed, so that an output error below cannot skip them.
+  const int device_code = falcon ? falcon->Finish() : kExitOk;
   if (listener) listener->Stop();
   watchdog.Stop();
   drain.Stop(palpa::servo::RunEndName(end));
@@ -323,7 +325,7 @@ int Run(const palpa::palpad::Options& o) {
     case palpa::servo::RunEnd::kInvalidRate:
       break;
   }
-  if (falcon && falcon->Finish() != kExitOk) code = kExitRunFailed;
+  if (device_code != kExitOk) code = kExitRunFailed;
   if (sim) {
     const auto& f = sim->last_force_n();
     std::fprintf(stderr, "palpad: sim device: last force written (%g, %g, %g) N\n", f[0], f[1], f[2]);
