@@ -337,6 +337,11 @@ device::IoStatus FalconDevice::DoRead(device::HipReading& out) {
 
 bool FalconDevice::CheckEncodersMove(const std::array<std::int16_t, 3>& before,
                                      const std::array<std::int16_t, 3>& now_counts, std::int64_t now_ns) {
+  if (stale_ramp_start_ns_ >= 0) {  // found stale: fading, whatever the encoders do now
+    if (now_ns - stale_ramp_start_ns_ < config_.stale_ramp_ns) return true;
+    Latch(stale_fault_);
+    return false;
+  }
   // command_ is the command this reply answers: the window restarts whenever the torque was zero
   // (an idle grip may rest still for ever) or an encoder moved.
   if (config_.stale_encoder_ns <= 0 || now_counts != before || command_.counts == std::array<std::int16_t, 3>{}) {
@@ -350,6 +355,12 @@ bool FalconDevice::CheckEncodersMove(const std::array<std::int16_t, 3>& before,
   f.encoders = now_counts;
   f.command = command_.counts;
   f.force_n = last_force_n_;
+  if (config_.stale_ramp_ns > 0) {
+    stale_fault_ = f;
+    stale_ramp_start_ns_ = now_ns;
+    stale_ramp_from_ = command_.counts;
+    return true;
+  }
   Latch(f);
   return false;
 }
@@ -360,7 +371,15 @@ device::IoStatus FalconDevice::DoWrite(const std::array<double, 3>& force_n) {
   if (state_ == FalconState::kActive) {
     cmd.control = falcon::kControlHoming | kLedActive;
     const bool zero = force_n[0] == 0.0 && force_n[1] == 0.0 && force_n[2] == 0.0;
-    if (!zero) {
+    if (stale_ramp_start_ns_ >= 0) {
+      // Stale encoders: the held command fades (integer counts, truncated towards zero, so the
+      // torque never grows); a zero force from the loop (e-stop, stop) still zeroes it at once.
+      const std::int64_t left = config_.stale_ramp_ns - (transport_.NowNs() - stale_ramp_start_ns_);
+      for (std::size_t a = 0; a < 3; ++a)
+        cmd.counts[a] = zero || left <= 0
+                            ? std::int16_t{0}
+                            : static_cast<std::int16_t>(std::int64_t{stale_ramp_from_[a]} * left / config_.stale_ramp_ns);
+    } else if (!zero) {
       const auto tau = jacobian_ok_ ? falcon::ForceToTorque(jacobian_, force_n) : std::nullopt;
       if (tau) {
         bool saturated = false;
@@ -477,7 +496,9 @@ std::string FalconDevice::FaultMessage() const {
       return "device fault: encoders frozen at " + Encoders(f.encoders) + " for " + Ms(f.waited_ns) +
              " while commanding torque " + Encoders(f.command) + " counts for a force of " + force +
              ": a Falcon under torque never reads exactly still (limit " + Ms(config_.stale_encoder_ns) +
-             "), so the readings no longer follow the grip (firmware stalled or encoders lost)" + where + zero;
+             "), so the readings no longer follow the grip (firmware stalled or encoders lost); the held torque "
+             "faded to zero over " +
+             Ms(config_.stale_ramp_ns) + where + zero;
     }
     case FalconFault::kHomingTimeout:
       if (f.homed == falcon::kAllHomed)

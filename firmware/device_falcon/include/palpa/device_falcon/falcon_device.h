@@ -14,7 +14,8 @@
 // Safety (docs/falcon.md §4): torque is non-zero only in Active, i.e. after all three axes
 // reported homed; a reply missing for more than 2 ms, a lost device, a USB error, an encoder jump
 // beyond a physical bound, a lost homed flag, a failed forward kinematics or encoders that stay
-// exactly still for stale_encoder_ns while torque is commanded (frozen firmware) each latch Fault: the
+// exactly still for stale_encoder_ns while torque is commanded (frozen firmware; its held torque first
+// fades to zero over stale_ramp_ns) each latch Fault: the
 // read reports kError, the loop writes zero force, which DoWrite turns into a zero-torque packet
 // (best effort when the device is gone). FaultMessage() says what happened, for people.
 //
@@ -117,6 +118,11 @@ struct FalconConfig {
   /// reading exactly the same while every command of this long carried non-zero torque means the
   /// firmware stopped updating them (frozen@N); 0: off. Measured on the transport clock.
   std::int64_t stale_encoder_ns = 500'000'000;
+  /// Once the encoders are found stale, the motor command held at that moment fades linearly to
+  /// zero over this long before the fault latches (issue 18: a fault ramps to zero rather than
+  /// dropping up to 8 N from under a hand that leans on it). The pose is unknown meanwhile, so no
+  /// new force is computed: the loop's force is ignored and only the held torque shrinks. 0: step.
+  std::int64_t stale_ramp_ns = 50'000'000;
   std::uint64_t tick_limit = 0;  ///< Read answers kEnd after this many ticks (0: never; a replay sets it)
   falcon::FkConfig fk;
 };
@@ -206,6 +212,9 @@ class FalconDevice final : public device::HapticDevice {
   bool jacobian_ok_ = false;
   bool zero_sent_after_fault_ = false;
   std::int64_t still_since_ns_ = 0;       // encoders unchanged, torque non-zero, since then
+  std::int64_t stale_ramp_start_ns_ = -1;  // ≥ 0: stale encoders found, the held torque is fading
+  std::array<std::int16_t, 3> stale_ramp_from_{};  // the command held when they were found
+  FaultInfo stale_fault_;                  // latched when the fade ends
   std::array<double, 3> last_force_n_{};  // the force DoWrite was asked for last
 };
 
