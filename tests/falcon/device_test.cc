@@ -245,7 +245,8 @@ TEST(FalconDevice, FrozenEncodersAreReportedAtHoming) {
 
 // Issue 18: encoders that freeze under torque end the run, and the torque held then fades to zero
 // over stale_ramp_ns (50 ms) instead of dropping at once: each command after the 500 ms window is
-// no larger than the one before, per axis, the last one is within a tick's step of zero, and the fade takes 50 ± 2 ticks.
+// no larger than the one before, per axis, the last one is within a tick's step of zero, and the fade takes 50 ± 2
+// ticks.
 TEST(FalconDevice, FrozenEncodersInContactFadeTheHeldTorqueToZeroThenFault) {
   std::uint64_t homing = 0;  // firmware exchanges before forces come on (frozen@N counts these)
   {

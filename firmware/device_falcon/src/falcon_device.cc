@@ -376,9 +376,10 @@ device::IoStatus FalconDevice::DoWrite(const std::array<double, 3>& force_n) {
       // torque never grows); a zero force from the loop (e-stop, stop) still zeroes it at once.
       const std::int64_t left = config_.stale_ramp_ns - (transport_.NowNs() - stale_ramp_start_ns_);
       for (std::size_t a = 0; a < 3; ++a)
-        cmd.counts[a] = zero || left <= 0
-                            ? std::int16_t{0}
-                            : static_cast<std::int16_t>(std::int64_t{stale_ramp_from_[a]} * left / config_.stale_ramp_ns);
+        cmd.counts[a] =
+            zero || left <= 0
+                ? std::int16_t{0}
+                : static_cast<std::int16_t>(std::int64_t{stale_ramp_from_[a]} * left / config_.stale_ramp_ns);
     } else if (!zero) {
       const auto tau = jacobian_ok_ ? falcon::ForceToTorque(jacobian_, force_n) : std::nullopt;
       if (tau) {

@@ -211,11 +211,11 @@ class FalconDevice final : public device::HapticDevice {
   falcon::Mat3 jacobian_{};
   bool jacobian_ok_ = false;
   bool zero_sent_after_fault_ = false;
-  std::int64_t still_since_ns_ = 0;       // encoders unchanged, torque non-zero, since then
-  std::int64_t stale_ramp_start_ns_ = -1;  // ≥ 0: stale encoders found, the held torque is fading
+  std::int64_t still_since_ns_ = 0;                // encoders unchanged, torque non-zero, since then
+  std::int64_t stale_ramp_start_ns_ = -1;          // ≥ 0: stale encoders found, the held torque is fading
   std::array<std::int16_t, 3> stale_ramp_from_{};  // the command held when they were found
-  FaultInfo stale_fault_;                  // latched when the fade ends
-  std::array<double, 3> last_force_n_{};  // the force DoWrite was asked for last
+  FaultInfo stale_fault_;                          // latched when the fade ends
+  std::array<double, 3> last_force_n_{};           // the force DoWrite was asked for last
 };
 
 }  // namespace palpa::device_falcon
