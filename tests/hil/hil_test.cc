@@ -1,19 +1,22 @@
 // `palpa hil` as CI and a person use it (docs/hil.md). The truths: the committed goldens, the
 // analytic sphere (k times penetration, radial direction), and settings that must break them.
 #include <gtest/gtest.h>
-
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <span>
 #include <string>
+#include <vector>
 
+#include "grid_faces.h"
 #include "palpa/trace/trace.h"
 #include "process.h"
 #include "recorder.h"
@@ -187,14 +190,30 @@ TEST(Hil, RealHandInvariantsCanFail) {
   fs::remove_all(dir);
 }
 
-// Issue 19: `palpa build` says when a field touches its grid boundary (φ < 0 on a face): the open
-// plate (two sheets without a rim) does, the closed sphere does not.
-TEST(Hil, BuildWarnsWhenTheFieldTouchesItsGridBoundary) {
+// Issue 19: `palpa build` says when a field touches its grid boundary (φ < 0 on a face). Since
+// issue 20 it closes an open scan inside its grid, so the open plate (two sheets without a rim) no
+// longer touches it; the count behind the warning is checked on hand-made grids instead.
+TEST(Hil, NegativeFaceNodesCountsTheGridFacesOnly) {
+  const std::array<int, 3> dims = {3, 4, 5};  // 60 nodes, 1·2·3 = 6 of them interior
+  std::vector<std::int32_t> phi(60, -65536);
+  EXPECT_EQ(palpa::cli::NegativeFaceNodes(std::span<const std::int32_t>(phi), dims), 54u);
+  std::fill(phi.begin(), phi.end(), 65536);
+  for (int i = 1; i < 2; ++i)
+    for (int j = 1; j < 3; ++j)
+      for (int k = 1; k < 4; ++k) phi[static_cast<std::size_t>((i * 4 + j) * 5 + k)] = -65536;
+  EXPECT_EQ(palpa::cli::NegativeFaceNodes(std::span<const std::int32_t>(phi), dims), 0u);
+  phi[(2 * 4 + 3) * 5 + 4] = -1;  // the far corner
+  phi[(1 * 4 + 2) * 5 + 0] = -1;  // the middle of the z = 0 face
+  EXPECT_EQ(palpa::cli::NegativeFaceNodes(std::span<const std::int32_t>(phi), dims), 2u);
+}
+
+TEST(Hil, BuildClosesTheOpenPlateInsideItsGrid) {
   const std::string dir = TempDir("faces");
   const std::string src = PALPA_SOURCE_DIR;
   const Result plate = Palpa("build " + src + "/hil/fields/open-plate.xyz --fit 0.04 -q -o " + dir + "/plate.palpa");
   EXPECT_EQ(plate.code, 0) << plate.out;
-  EXPECT_NE(plate.out.find("the field touches its grid boundary"), std::string::npos) << plate.out;
+  EXPECT_EQ(plate.out.find("touches its grid boundary"), std::string::npos) << plate.out;
+  EXPECT_NE(plate.out.find("the scan is open"), std::string::npos) << plate.out;
   const Result sphere =
       Palpa("build " + src + "/data/sphere926.pwn --scale 0.003 --cells 80 -q -o " + dir + "/s.palpa");
   EXPECT_EQ(sphere.code, 0) << sphere.out;
