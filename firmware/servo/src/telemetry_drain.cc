@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <ctime>
 
+#include "palpa/io/file_safety.h"
 #include "palpa/servo/report.h"
 
 namespace palpa::servo {
@@ -113,6 +114,8 @@ std::string TelemetryDrain::StatusJson(const char* state) const {
 bool TelemetryDrain::WriteStatus(const char* state) {
   if (config_.status_path.empty()) return true;
   const std::string json = StatusJson(state);
+  // Re-checked on every write: rename() would replace a device or FIFO put there meanwhile.
+  if (!io::CheckOutputTarget(config_.status_path)) return false;
   const std::string temp = config_.status_path + ".tmp";
   std::FILE* f = std::fopen(temp.c_str(), "w");
   if (f == nullptr) return false;  // a live view: a failed update is retried next period
