@@ -4,6 +4,7 @@
 // behaviour) fails the test instead of stalling it. Truths: the node types made here (stat), the
 // exit codes README.md documents (0 ok, 1 I/O, 2 bad input), the bytes of the inputs.
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "palpa/trace/trace.h"
 #include "process.h"
@@ -59,6 +61,15 @@ class FileSafety : public palpa::test_support::TempDirTest {
     }
     return f;
   }
+  // A character device to aim outputs at. As root a regression would replace the target, so root
+  // gets a private copy of /dev/null's node (1, 3) made here, never the system's; others get
+  // /dev/null and /dev/full, which they cannot replace anyway. Empty if no node can be made.
+  std::vector<std::string> Devices() {
+    if (::geteuid() != 0) return {"/dev/null", "/dev/full"};
+    const std::string p = Path("null.dev");
+    if (!fs::exists(p) && ::mknod(p.c_str(), S_IFCHR | 0666, ::makedev(1, 3)) != 0) return {};
+    return {p};
+  }
   std::string Fifo(const std::string& leaf) {
     const std::string p = Path(leaf);
     EXPECT_EQ(::mkfifo(p.c_str(), 0600), 0);
@@ -98,20 +109,24 @@ TEST_F(FileSafety, EveryHostWriterRefusesDevicesFifosAndDirectories) {
       "sample " + mesh_in + " --count 100 -o ",
   };
   for (const std::string& command : commands) {
-    for (const std::string& target : {std::string("/dev/null"), std::string("/dev/full"), fifo, Path("dir.palpa")}) {
+    std::vector<std::string> targets = Devices();
+    targets.push_back(fifo);
+    targets.push_back(Path("dir.palpa"));
+    for (const std::string& target : targets) {
       // mesh and sample want an extension; the check comes first for every target anyway.
       const Outcome r = Palpa(command + target);
       EXPECT_EQ(r.code, 2) << command << target << "\n" << r.out;
       EXPECT_NE(r.out.find(target + ": is a"), std::string::npos) << command << target << "\n" << r.out;
     }
   }
-  EXPECT_TRUE(IsCharDevice("/dev/null"));
-  EXPECT_TRUE(IsCharDevice("/dev/full"));
+  for (const std::string& device : Devices()) EXPECT_TRUE(IsCharDevice(device)) << device;
   EXPECT_TRUE(IsFifo(fifo));
   EXPECT_TRUE(fs::is_directory(Path("dir.palpa")));
-  const Outcome keygen = Palpa("keygen -o /dev/null --force");
-  EXPECT_EQ(keygen.code, 2) << keygen.out;
-  EXPECT_TRUE(IsCharDevice("/dev/null"));
+  for (const std::string& device : Devices()) {
+    const Outcome keygen = Palpa("keygen -o " + device + " --force");
+    EXPECT_EQ(keygen.code, 2) << keygen.out;
+    EXPECT_TRUE(IsCharDevice(device));
+  }
 }
 
 // Finding 6: `palpa info /dev/zero` read without limit and aborted (std::bad_alloc, signal 6).
@@ -176,20 +191,21 @@ TEST_F(FileSafety, PalpadRefusesBadOutputsAndConfigsBeforeTheRun) {
   struct Case {
     std::string args, names;
   };
-  const Case cases[] = {
-      {"--out /dev/full", "--out /dev/full: is a character device"},
-      {"--out " + Path("o.csv") + " --summary-json /dev/null", "--summary-json /dev/null: is a character device"},
+  std::vector<Case> cases = {
       {"--out " + Path("o.csv") + " --status " + fifo, "--status " + fifo + ": is a FIFO"},
       {"--out " + Path("o.csv") + " --record " + dir_.string(), "--record " + dir_.string() + ": is a directory"},
       {"--out " + trace, "--out " + trace + ": is the same file as the input " + trace},
   };
+  for (const std::string& device : Devices()) {
+    cases.push_back({"--out " + Path("o.csv") + " --summary-json " + device,
+                     "--summary-json " + device + ": is a character device"});
+  }
   for (const Case& c : cases) {
     const Outcome r = Palpad(base + c.args);
     EXPECT_EQ(r.code, 2) << c.args << "\n" << r.out;
     EXPECT_NE(r.out.find(c.names), std::string::npos) << c.args << "\n" << r.out;
   }
-  EXPECT_TRUE(IsCharDevice("/dev/full"));
-  EXPECT_TRUE(IsCharDevice("/dev/null"));
+  for (const std::string& device : Devices()) EXPECT_TRUE(IsCharDevice(device)) << device;
   EXPECT_TRUE(IsFifo(fifo));
   EXPECT_NE(Slurp(trace).find("# palpa-trace"), std::string::npos);
   // --out /dev/null still means "no CSV" (a service running for hours).
@@ -212,6 +228,18 @@ TEST_F(FileSafety, MessagesQuoteInputBytesEscaped) {
   EXPECT_EQ(r.out.find('\x1b'), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find('\0'), std::string::npos);
   EXPECT_NE(r.out.find("'\\x1b]0;pwned\\x07\\x00' is not a number"), std::string::npos) << r.out;
+
+  // A 100,000-digit number is quoted as its first 64 digits, by palpa (CLI11) and palpad.
+  const std::string digits(100000, '7');
+  const Outcome p = Palpa("build " + points_ + " -o " + Path("o.palpa") + " --scale 1 --offset " + digits + "x");
+  EXPECT_EQ(p.code, 2) << p.out.size();
+  EXPECT_LT(p.out.size(), 1000U);
+  EXPECT_NE(p.out.find(std::string(64, '7') + "…"), std::string::npos) << p.out;
+  const Outcome k = Palpad("--device sim --field " + Field() + " --k " + digits + "x --out " + Path("o.csv"));
+  EXPECT_EQ(k.code, 2) << k.out.size();
+  EXPECT_EQ(k.out.find(std::string(65, '7')), std::string::npos) << k.out.size();
+  EXPECT_NE(k.out.find("--k: '" + std::string(64, '7') + "…' is not a finite number"), std::string::npos)
+      << k.out.substr(0, 300);
 
   const std::string trace = Write("t.csv", "# palpa-trace v2 units=s,m frame=\x1b[31mred columns=t_s,x_m,y_m,z_m\n");
   const Outcome t = Palpad("--device sim --field " + Field() + " --trace " + trace + " --out " + Path("o.csv"));
