@@ -100,13 +100,12 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
   if (nv < 4 || nf < 4) return fail(fmt::format("{} vertices and {} faces cannot enclose a volume", nv, nf));
   constexpr long long kMaxCount = 1LL << 28;
   if (nv > kMaxCount || nf > kMaxCount) return fail("more than 2^28 vertices or faces");
-  // A vertex line takes at least 6 bytes ("0 0 0\n"), a face line 8: counts the file cannot hold
-  // are refused before memory is reserved for them.
-  if (static_cast<std::uint64_t>(nv) * 6 + static_cast<std::uint64_t>(nf) * 8 > in->size())
-    return fail(fmt::format("{} vertices and {} faces cannot fit in the file's {} bytes", nv, nf, in->size()));
 
   TriangleMesh mesh;
-  mesh.vertices.reserve(static_cast<std::size_t>(nv));
+  // Reserved only as far as the file can hold (a vertex line takes at least 6 bytes, "0 0 0\n"; a
+  // face 8): a header's counts alone never allocate gigabytes for a small file.
+  const std::uint64_t size = in->size();
+  mesh.vertices.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(static_cast<std::uint64_t>(nv), size / 6)));
   for (long long v = 0; v < nv; ++v) {
     if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} vertices", v, nv));
     if (t.size() < 3) return fail(fmt::format("vertex {} needs 3 coordinates, found {}", v, t.size()));
@@ -118,8 +117,9 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
     }
     mesh.vertices.push_back(p);
   }
-  mesh.faces.reserve(static_cast<std::size_t>(nf));
-  mesh.face_lines.reserve(static_cast<std::size_t>(nf));
+  const auto faces = static_cast<std::size_t>(std::min<std::uint64_t>(static_cast<std::uint64_t>(nf), size / 8));
+  mesh.faces.reserve(faces);
+  mesh.face_lines.reserve(faces);
   for (long long f = 0; f < nf; ++f) {
     if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} faces", f, nf));
     int n = 0;

@@ -64,7 +64,7 @@ std::expected<int, FileError> OpenRegular(std::string_view path, std::string_vie
   const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) {
     const int e = errno;
-    const std::string why = std::string("cannot open the ") + std::string(what) + ": " + std::strerror(e);
+    const std::string why = std::string("cannot read the ") + std::string(what) + ": " + std::strerror(e);
     // A missing or unreadable file is the user's naming (bad input); anything else is the system.
     if (e == ENOENT || e == ENOTDIR || e == EACCES || e == ELOOP || e == ENAMETOOLONG || e == EISDIR)
       return std::unexpected(Bad(Quote(path) + ": " + why));
