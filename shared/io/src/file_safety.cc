@@ -106,7 +106,7 @@ std::expected<std::vector<std::byte>, FileError> ReadBounded(std::string_view pa
     if (got == data.size()) {
       // The size at open may be stale (a growing file): read on, up to the cap plus one byte.
       if (data.size() > max_bytes) return too_large(0);
-      data.resize(std::min<std::uint64_t>(max_bytes + 1, data.size() + 65536));
+      data.resize(static_cast<std::size_t>(std::min<std::uint64_t>(max_bytes + 1, data.size() + 65536)));
     }
     const ssize_t n = ::read(*fd, data.data() + got, data.size() - got);
     if (n < 0) {
