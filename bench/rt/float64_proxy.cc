@@ -47,6 +47,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
       st.last_hip = h;
       st.phi = phi_h;
       st.grad_valid = false;
+      st.hip_phi_bound = phi_h;
       r.proxy = h;
       r.iterations = 1;
       return r;
@@ -54,12 +55,27 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
   }
   if (!st.valid || !st.seated) {
     const double ph = field.Phi(h);
-    st = {h, ph, {}, h, false, ph >= 0, true};
+    st = {h, ph, {}, h, false, ph >= 0, true, 0, ph};
     r.proxy = h;
     r.iterations = 1;
     return r;
   }
   const bool fast = AxisVariation(Sub(h, st.last_hip), field) > prm.settle_samples * piece;
+  // φ(X_h) every tick, or an upper bound that shows the HIP inside (proxy.cc); in free motion the
+  // sample is one of the budget, at the surface one more.
+  if (!phi_h_known && st.phi <= prm.near && st.hip_phi_bound < 0) {
+    const double up = st.hip_phi_bound + AxisVariation(Sub(h, st.last_hip), field.band());
+    if (up < -1) {
+      phi_h = up;
+      phi_h_known = true;
+    }
+  }
+  if (!phi_h_known) {
+    phi_h = field.Phi(h);
+    phi_h_known = true;
+    if (st.phi > prm.near) samples = 1;
+  }
+  const double way = 1.5 * delta;  // the floor of contact pieces and the leaving march
   Vec3d p = st.proxy;
   double phi_p = st.phi;
   Vec3d g = st.grad;
@@ -118,18 +134,11 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         break;
       }
       const double c = phi_p + Dot(d, g);
-      if (c >= 0 && !leave_blocked) {
-        if (!phi_h_known) {
-          phi_h = field.Phi(h);
-          phi_h_known = true;
-          ++samples;
-        }
-        if (phi_h >= 0) {
-          leave = true;
-          break;
-        }
+      if (!leave_blocked && phi_h >= 0) {
+        leave = true;
+        break;
       }
-      if (samples >= prm.settle_samples && !lagging) break;
+      if (samples >= prm.settle_samples && !lagging && !leave_blocked) break;
       const Vec3d dn = {-prm.beta * phi_p / gg_now * g[0], -prm.beta * phi_p / gg_now * g[1],
                         -prm.beta * phi_p / gg_now * g[2]};
       const double along = Dot(d, g) / gg_now;
@@ -161,7 +170,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         dt_variation *= s;
       }
       lagging = dt_variation > first_room && (fast || dt_variation > first_room + 4 * piece);
-      const int room = (lagging ? max_samples : std::min(prm.settle_samples, max_samples)) - samples;
+      const int room = (lagging || leave_blocked ? max_samples : std::min(prm.settle_samples, max_samples)) - samples;
       if (room <= 0) break;
       double reached = 0;
       Vec3d e = p;
@@ -182,12 +191,12 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
           s.phi = field.Phi(q);
         }
         ++samples;
-        const double need = phi_p + s.phi + 2 * delta;
+        const double need = phi_p + s.phi + 2 * way;
         const double piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
         const bool in_band = phi_p <= field.background() && s.phi <= field.background();
-        if (!(s.phi >= -delta / 2 && need >= 0 &&
-              ((in_band && piece_variation <= need) || (in_band ? Certified(phi_p, s.phi, Sub(q, e), band, delta)
-                                                                : Certified(phi_p, s.phi, Sub(q, e), field, delta))))) {
+        if (!(s.phi >= -delta / 2 && (s.phi <= prm.near || leave_blocked) && need >= 0 &&
+              ((in_band && piece_variation <= need) || (in_band ? Certified(phi_p, s.phi, Sub(q, e), band, way)
+                                                                : Certified(phi_p, s.phi, Sub(q, e), field, way))))) {
           break;
         }
         e = q;
@@ -222,9 +231,9 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         const double len = Len(d);
         if (len == 0) break;
         const double rate = std::min(field.norm(), AxisVariation(d, field) / len);
-        const double budget = phi_p + piece;
+        const double budget = phi_p + 2 * delta;
         const double step = rate == 0 ? len : budget / rate;
-        if (step >= len && phi_h >= -delta / 2) {
+        if (step >= len && phi_h >= 0) {
           p = h;
           phi_p = phi_h;
           grad_valid = false;
@@ -235,7 +244,7 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
         if (q == p) break;
         const double phi_q = field.Phi(q);
         ++samples;
-        if (phi_q < -delta / 2 || !Certified(phi_p, phi_q, Sub(q, p), field, delta)) break;
+        if (phi_q < -delta || !Certified(phi_p, phi_q, Sub(q, p), field, way)) break;
         p = q;
         phi_p = phi_q;
         grad_valid = false;
@@ -250,26 +259,32 @@ Float64Result Float64Tick(const Float64Field& field, const Float64Params& prm, F
     }
     if (done || phi_p <= prm.near) break;  // budget, convergence or nothing to do; else free motion
   }
+  const Vec3d last_hip = st.last_hip, last_proxy = st.proxy;
+  const double last_pull = st.pull;
   st.proxy = p;
   st.last_hip = h;
   st.phi = phi_p;
   st.grad = g;
   st.grad_valid = grad_valid;
+  st.pull = 0;
+  st.hip_phi_bound = phi_h;
   r.proxy = p;
   r.iterations = samples;
   if (p == h) return r;
-  bool behind = leave_blocked;
-  if (!behind && grad_valid) {
-    behind = phi_p + Dot(Sub(h, p), g) < 0;
-  } else if (!behind && phi_h_known) {
-    behind = phi_h < 0;
-  }
-  if (phi_p > prm.near || !behind) return r;
+  // The hold rule, the rise limit and the overpower fade of proxy.cc.
+  const bool inside_hip = phi_h < 0;
+  if (phi_p > prm.near || !(inside_hip || leave_blocked)) return r;
+  const double fade = std::floor(prm.max_force * 65536.0 / 1024) / 65536.0;
+  const double cap = inside_hip
+                         ? last_pull + fade + prm.k * (Len(Sub(h, last_hip)) + std::min(1.0, Len(Sub(p, last_proxy))))
+                         : std::max(0.0, last_pull - fade);
+  const double limit = std::min(prm.max_force, cap);
   const Vec3d u = Sub(p, h);
   const double len = Len(u);
-  const double scale = prm.k * len > prm.max_force ? prm.max_force / len : prm.k;
+  const double scale = prm.k * len > limit ? limit / len : prm.k;
   r.force = {u[0] * scale, u[1] * scale, u[2] * scale};
   r.contact = r.force != Vec3d{};
+  st.pull = r.contact ? std::min(limit, prm.k * len) : 0;
   return r;
 }
 

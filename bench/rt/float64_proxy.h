@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 #include "palpa/blob/blob.h"
 #include "palpa/proxy/proxy.h"
@@ -179,6 +180,8 @@ struct Float64State {
   Vec3d grad{};
   Vec3d last_hip{};
   bool grad_valid = false, seated = false, valid = false;
+  double pull = 0;               // last tick's |f| bound, N (proxy::ProxyState::pull_q16)
+  double hip_phi_bound = 1e300;  // an upper bound of φ(last_hip), voxels (none: 1e300)
 };
 
 /// A grid position (Q16.16 voxels) in double voxels.
@@ -194,6 +197,9 @@ inline Float64State ToFloat64(const proxy::ProxyState& s) {
   f.grad_valid = s.grad_valid;
   f.seated = s.seated;
   f.valid = s.valid;
+  f.pull = s.pull_q16 / 65536.0;
+  f.hip_phi_bound =
+      s.hip_phi_bound_q16 == std::numeric_limits<std::int32_t>::max() ? 1e300 : s.hip_phi_bound_q16 / 65536.0;
   return f;
 }
 

@@ -8,8 +8,10 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "palpa/blob/blob.h"
 #include "palpa/trace/trace.h"
@@ -34,7 +36,8 @@ TEST_F(Cli, BadPointFilesExitTwoAndWriteNothing) {
   const Case cases[] = {
       {"malformed.xyz", std::string(kFourPoints) + "1 2 3 4\n", "malformed.xyz:5"},
       {"nan.xyz", std::string(kFourPoints) + "nan 0 0 0 0 1\n", "nan.xyz:5"},
-      {"zero.xyz", std::string(kFourPoints) + "0.5 0.5 0.5 0 0 0\n", "zero.xyz:5"},
+      // A zero normal is dropped (issue 20); refused only when fewer than 4 usable samples remain.
+      {"zero.xyz", "0 0 0 0 0 -1\n1 0 0 1 0 0\n0 1 0 0 1 0\n0.5 0.5 0.5 0 0 0\n", "zero.xyz:4"},
       {"few.xyz", "0 0 0 0 0 1\n1 0 0 1 0 0\n0 1 0 0 1 0\n", "few.xyz"},
   };
   for (const Case& c : cases) {
@@ -50,6 +53,110 @@ TEST_F(Cli, BadPointFilesExitTwoAndWriteNothing) {
   EXPECT_FALSE(fs::exists(Path("out.palpa")));
   // Nothing else (no temporary) is left in the directory.
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().extension(), ".xyz") << e.path();
+}
+
+// Issue 20: a real scan with a few zero or non-finite normals and exact duplicates is not refused
+// whole: those samples are dropped, counted and the first of each named by its line; the field is
+// the one of the file without them (compared through palpa export). --strict refuses the file.
+TEST_F(Cli, DegenerateSamplesAreDroppedAndNamed) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), 926u);
+  std::string clean;
+  for (const std::string& l : lines) clean += l + "\n";
+  std::string dirty;
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    if (i == 100) dirty += "1 2 3 0 0 0\n";    // line 101: zero-length normal
+    if (i == 500) dirty += "1 2 4 nan 0 1\n";  // line 502: non-finite normal
+    dirty += lines[i] + "\n";
+  }
+  dirty += lines[7] + "\n";  // line 929: the position of line 8 (an exact duplicate)
+  const std::string clean_in = Write("clean.xyz", clean);
+  const std::string dirty_in = Write("dirty.xyz", dirty);
+  const Outcome a = Palpa("build " + clean_in + " -o " + Path("clean.palpa") + " --cells 48 -q");
+  ASSERT_EQ(a.code, 0) << a.out;
+  const Outcome b = Palpa("build " + dirty_in + " -o " + Path("dirty.palpa") + " --cells 48 -q");
+  ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_NE(b.out.find("dropped 2 samples with a zero-length or non-finite normal (first: " + dirty_in +
+                       ":101) and 1 exact duplicate (first: " + dirty_in + ":929, the position of " + dirty_in +
+                       ":8); 926 samples remain"),
+            std::string::npos)
+      << b.out;
+  ASSERT_EQ(Palpa("export " + Path("clean.palpa") + " --npy " + Path("clean.npy")).code, 0);
+  ASSERT_EQ(Palpa("export " + Path("dirty.palpa") + " --npy " + Path("dirty.npy")).code, 0);
+  const auto read = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  EXPECT_EQ(read(Path("clean.npy")), read(Path("dirty.npy")));
+  const Outcome info = Palpa("info --json " + Path("dirty.palpa"));
+  EXPECT_NE(info.out.find("\"point_count\": 926"), std::string::npos) << info.out;
+
+  const Outcome strict = Palpa("build " + dirty_in + " -o " + Path("strict.palpa") + " --cells 48 --strict");
+  EXPECT_EQ(strict.code, 2) << strict.out;
+  EXPECT_NE(
+      strict.out.find("--strict: 2 samples with a zero-length or non-finite normal (first: " + dirty_in + ":101)"),
+      std::string::npos)
+      << strict.out;
+  EXPECT_FALSE(fs::exists(Path("strict.palpa")));
+  // A non-finite position stays an error.
+  const std::string nan_pos = Write("nanpos.xyz", clean + "nan 0 0 0 0 1\n");
+  const Outcome n = Palpa("build " + nan_pos + " -o " + Path("n.palpa") + " --cells 48");
+  EXPECT_EQ(n.code, 2) << n.out;
+  EXPECT_NE(n.out.find("nanpos.xyz:927: position is not finite"), std::string::npos) << n.out;
+}
+
+// Issue 20: a stray sample off the surface and a point at 1e30 are ignored, counted and named
+// (the farthest); the field is that of the file without them (compared through palpa export),
+// so neither makes solid of its own nor collapses --fit (the 1e30 point used to turn the grid
+// into 300 x 17 x 17 nodes, exit 0).
+TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string clean((std::istreambuf_iterator<char>(in)), {});
+  // sphere926 is radius 10 with ~1.2 between samples: 13 is 3 units off the surface, outward.
+  const std::string stray_in = Write("stray.xyz", clean + "13 0 0 1 0 0\n");
+  const std::string far_in = Write("far.xyz", clean + "1e30 1e30 1e30 0 0 1\n");
+  const std::string clean_in = Write("clean.xyz", clean);
+  const auto read = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  ASSERT_EQ(Palpa("build " + clean_in + " -o " + Path("clean.palpa") + " --cells 48 -q").code, 0);
+  ASSERT_EQ(Palpa("export " + Path("clean.palpa") + " --npy " + Path("clean.npy")).code, 0);
+  for (const std::string& input : {stray_in, far_in}) {
+    const Outcome b = Palpa("build " + input + " -o " + Path("x.palpa") + " --cells 48 -q");
+    ASSERT_EQ(b.code, 0) << b.out;
+    EXPECT_NE(b.out.find("ignored 1 sample that its neighbours do not support (off their surface or isolated); "
+                         "the farthest: " +
+                         input + ":927"),
+              std::string::npos)
+        << b.out;
+    ASSERT_EQ(Palpa("export " + Path("x.palpa") + " --npy " + Path("x.npy")).code, 0);
+    EXPECT_EQ(read(Path("x.npy")), read(Path("clean.npy"))) << input;
+  }
+  // The clean file has none.
+  const Outcome c = Palpa("build " + clean_in + " -o " + Path("c.palpa") + " --cells 48 -q");
+  EXPECT_EQ(c.out.find("ignored"), std::string::npos) << c.out;
+}
+
+// Issue 20: an open scan is reported open (with the area the field closed), a closed one is not.
+TEST_F(Cli, OpenScanIsReportedOpen) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string cap;
+  for (std::string line; std::getline(in, line);) {
+    double x = 0, y = 0, z = 0;
+    if (std::sscanf(line.c_str(), "%lf %lf %lf", &x, &y, &z) == 3 && z > 0) cap += line + "\n";
+  }
+  const std::string cap_in = Write("cap.xyz", cap);
+  const Outcome open = Palpa("build " + cap_in + " -o " + Path("cap.palpa") + " --cells 64 -q");
+  ASSERT_EQ(open.code, 0) << open.out;
+  EXPECT_NE(open.out.find("the scan is open (the normals are not to blame)"), std::string::npos) << open.out;
+  EXPECT_EQ(open.out.find("not consistently oriented"), std::string::npos) << open.out;
+  const Outcome closed =
+      Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + Path("s.palpa") + " --cells 64 -q");
+  ASSERT_EQ(closed.code, 0) << closed.out;
+  EXPECT_EQ(closed.out.find("open"), std::string::npos) << closed.out;
 }
 
 TEST_F(Cli, FailedBuildKeepsThePreviousOutput) {

@@ -3,7 +3,7 @@
 // posix_memalign/pthread_mutex_lock are wrapped at link time. While a thread is armed, each call
 // is counted. Replacing operator new catches allocations made inside libstdc++.so
 // (which --wrap alone misses); --wrap catches direct C calls in our objects
-// (/work/shared/notes/cross-rt.md §5). The sibling tests prove the counters see a call, and
+// (docs/cross-rt.md §5). The sibling tests prove the counters see a call, and
 // DISABLED_MustFail.AllocationInsideArmedProxyTicks, run by ctest as
 // alloc_free.fail_allocation_inside_ticks with WILL_FAIL (tests/integration/CMakeLists.txt),
 // proves that the tick test's assertions fail when a tick allocates.

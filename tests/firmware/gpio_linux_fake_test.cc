@@ -1,5 +1,5 @@
 // The libgpiod backend against a scripted fake of libgpiod v1.6, linked in with
-// -Wl,--wrap=gpiod_… (house style §8; /work/shared/notes/cross-rt.md §3): the real call sites,
+// -Wl,--wrap=gpiod_… (house style §8; docs/cross-rt.md §3): the real call sites,
 // compiled against the real gpiod.h, call __wrap_gpiod_… here instead of the library. The fake
 // knows one chip, "gpiochip0" (= /dev/gpiochip0) with 32 lines; line 5 is held by another program.
 

@@ -127,6 +127,109 @@ TEST(Hil, ValidationAndInvariantsCanFail) {
   fs::remove_all(dir);
 }
 
+// Issue 19's invariants, each fed a run that breaks it (palpad outputs written by hand over the
+// R = 30 mm sphere at the origin, measured through a case's `output`): each must be reported.
+TEST(Hil, RealHandInvariantsCanFail) {
+  const std::string dir = TempDir("hands");
+  const std::string src = PALPA_SOURCE_DIR;
+  struct Row {
+    double hz, pz, fz;
+  };
+  // One row a millisecond: HIP and proxy on the z axis, force along z.
+  const auto write = [&](const std::string& name, const std::vector<Row>& rows) {
+    std::ofstream out(dir + "/" + name + ".csv");
+    out << "t_s,hip_x_m,hip_y_m,hip_z_m,proxy_x_m,proxy_y_m,proxy_z_m,force_x_n,force_y_n,force_z_n,contact\n";
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      out << static_cast<double>(i) * 0.001 << ",0,0," << rows[i].hz << ",0,0," << rows[i].pz << ",0,0," << rows[i].fz
+          << "," << (rows[i].fz != 0 ? 1 : 0) << "\n";
+  };
+  const Row outside{0.031, 0.031, 0}, pressed{0.028, 0.030, 1.6};
+  std::vector<Row> clear(12, Row{0.034, 0.0300, -1.0});  // HIP 4 mm outside, way clear, 1 N
+  clear.insert(clear.begin(), outside);
+  std::vector<Row> drop = {outside, outside};
+  drop.insert(drop.end(), 10, pressed);
+  drop.insert(drop.end(), 5, Row{0.028, 0.030, 0});  // HIP still 2 mm inside: the force may not vanish
+  std::vector<Row> step = {outside, pressed, pressed, Row{0.028, 0.030, 3.0}, pressed, pressed};
+  std::vector<Row> inside = {outside, pressed, Row{0.028, 0.0295, 1.2}, Row{0.028, 0.0295, 1.2}};
+  std::vector<Row> off = {outside, pressed, Row{0.028, 0.0306, 2.0}, Row{0.028, 0.0306, 2.0}};
+  write("clear", clear);
+  write("drop", drop);
+  write("step", step);
+  write("inside", inside);
+  write("off", off);
+  std::ofstream cases(dir + "/cases.toml");
+  cases << "[fields.test-sphere]\nbuild = \"build " << src << "/data/sphere926.pwn --scale 0.003 --offset 0,0,0\"\n";
+  for (const char* name : {"clear", "drop", "step", "inside", "off"})
+    cases << "[[case]]\nname = \"" << name << "\"\ntrace = \"" << src
+          << "/hil/traces/sphere-taps.ptb\"\nfield = \"test-sphere\"\nwhy = \"test\"\noutput = \"" << dir << "/" << name
+          << ".csv\"\n";
+  cases.close();
+  const Result r = Palpa("hil run --fast --cases " + dir + "/cases.toml --work " + kWork + " --goldens " + dir);
+  EXPECT_EQ(r.code, 1) << r.out;
+  // A case's lines: from its name to the next case's (a line with two spaces, then a name).
+  const auto section = [&](const std::string& name) {
+    const auto a = r.out.find("\n  " + name + " ");
+    if (a == std::string::npos) return std::string();
+    auto b = a + 1;
+    while ((b = r.out.find("\n  ", b + 1)) != std::string::npos && b + 3 < r.out.size() && r.out[b + 3] == ' ') {
+    }
+    return r.out.substr(a, b == std::string::npos ? std::string::npos : b - a);
+  };
+  EXPECT_NE(section("clear").find("force with the way clear"), std::string::npos) << r.out;
+  EXPECT_NE(section("drop").find("force dropped to zero with the HIP inside"), std::string::npos) << r.out;
+  EXPECT_NE(section("step").find("exceeds the slope limit"), std::string::npos) << r.out;
+  EXPECT_NE(section("inside").find("proxy inside the object"), std::string::npos) << r.out;
+  EXPECT_NE(section("off").find("with the proxy off the surface"), std::string::npos) << r.out;
+  // And each run breaks only what it was written to break (the checks are not just noisy).
+  EXPECT_EQ(section("clear").find("dropped"), std::string::npos) << r.out;
+  EXPECT_EQ(section("step").find("way clear"), std::string::npos) << r.out;
+  EXPECT_EQ(section("off").find("proxy inside"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
+// Issue 19: `palpa build` says when a field touches its grid boundary (φ < 0 on a face): the open
+// plate (two sheets without a rim) does, the closed sphere does not.
+TEST(Hil, BuildWarnsWhenTheFieldTouchesItsGridBoundary) {
+  const std::string dir = TempDir("faces");
+  const std::string src = PALPA_SOURCE_DIR;
+  const Result plate = Palpa("build " + src + "/hil/fields/open-plate.xyz --fit 0.04 -q -o " + dir + "/plate.palpa");
+  EXPECT_EQ(plate.code, 0) << plate.out;
+  EXPECT_NE(plate.out.find("the field touches its grid boundary"), std::string::npos) << plate.out;
+  const Result sphere =
+      Palpa("build " + src + "/data/sphere926.pwn --scale 0.003 --cells 80 -q -o " + dir + "/s.palpa");
+  EXPECT_EQ(sphere.code, 0) << sphere.out;
+  EXPECT_EQ(sphere.out.find("grid boundary"), std::string::npos) << sphere.out;
+  fs::remove_all(dir);
+}
+
+// `palpa trace import`: a recording scaled uniformly about its bounding-box centre into the
+// workspace, the scaling and the note kept in the comment; one that does not fit is refused.
+TEST(Hil, TraceImportScalesARecordingIntoTheWorkspace) {
+  const std::string dir = TempDir("import");
+  {
+    std::ofstream csv(dir + "/rec.csv");
+    csv << "t_s,x_m,y_m,z_m\n";
+    for (int i = 0; i <= 100; ++i)  // 0.3 m along x around (1, 2, 3) m, 0.1 s at 1 kHz
+      csv << i * 0.001 << "," << 0.85 + 0.003 * i << ",2,3\n";
+  }
+  const Result ok = Palpa("trace import " + dir + "/rec.csv --scale 0.1 --offset 0,0,0.01 --note 'licence: test' -o " +
+                          dir + "/t.ptb");
+  ASSERT_EQ(ok.code, 0) << ok.out;
+  auto t = palpa::trace::ReadTraceFile(dir + "/t.ptb");
+  ASSERT_TRUE(t.has_value()) << t.error().message;
+  ASSERT_EQ(t->samples.size(), 101u);
+  EXPECT_NEAR(t->samples.front().hip_m[0], -0.015, 1e-9);  // (0.85 − 1.0) × 0.1
+  EXPECT_NEAR(t->samples.back().hip_m[0], 0.015, 1e-9);
+  EXPECT_NEAR(t->samples.back().hip_m[2], 0.01, 1e-9);
+  EXPECT_NE(t->info.comment.find("scaled uniformly by 0.1"), std::string::npos) << t->info.comment;
+  EXPECT_NE(t->info.comment.find("licence: test"), std::string::npos) << t->info.comment;
+  const Result big = Palpa("trace import " + dir + "/rec.csv --scale 1 -o " + dir + "/big.ptb");
+  EXPECT_EQ(big.code, 2) << big.out;
+  EXPECT_NE(big.out.find("choose a smaller --scale"), std::string::npos) << big.out;
+  EXPECT_FALSE(fs::exists(dir + "/big.ptb"));
+  fs::remove_all(dir);
+}
+
 TEST(Hil, BadCaseListsNameTheLine) {
   const std::string dir = TempDir("bad");
   std::ofstream(dir + "/cases.toml") << "[fields.a]\nbuild = \"build x.xyz\"\n[[case]]\nname = \"c\"\ntrace = \"t\"\n"
@@ -156,7 +259,11 @@ TEST(Hil, TraceLibraryReadsAndStaysSmall) {
       auto t = palpa::trace::ReadTraceFile(e.path().string());
       ASSERT_TRUE(t.has_value()) << t.error().message;
       EXPECT_TRUE(t->info.binary);
-      EXPECT_NE(t->info.comment.find("palpa trace synth --kind"), std::string::npos) << e.path();  // how it was made
+      // How it was made: synthesised, or a recording imported with its provenance.
+      EXPECT_TRUE(t->info.comment.find("palpa trace synth --kind") != std::string::npos ||
+                  (t->info.comment.find("palpa trace import") != std::string::npos &&
+                   t->info.comment.find("licence") != std::string::npos))
+          << e.path();
     }
   }
   EXPECT_GE(traces, 8);

@@ -28,6 +28,23 @@ TEST(CheckOrientation, ConsistentBundledSetsPass) {
   }
 }
 
+// Issue 20: an open, one-sided scan with consistent normals is not "inconsistent": along -z the
+// outermost points of sphere926's cap z > 0 are its rim, whose normals are horizontal (before:
+// 1 of 26 directions counted inward, and the build blamed the normals).
+TEST(CheckOrientation, OpenScanRimIsNoEvidence) {
+  const auto points = ReadPoints(DataFile("sphere926.pwn"));
+  ASSERT_TRUE(points.has_value());
+  std::vector<Eigen::Vector3d> p, n;
+  for (std::size_t i = 0; i < points->positions.size(); ++i)
+    if (points->positions[i].z() > 0) p.push_back(points->positions[i]), n.push_back(points->normals[i]);
+  const OrientationReport r = CheckOrientation(p, n);
+  EXPECT_EQ(r.inward_support_directions, 0) << r.Describe();
+  EXPECT_FALSE(r.Inconsistent()) << r.Describe();
+  // The same cap inside out is still caught.
+  for (auto& x : n) x = -x;
+  EXPECT_TRUE(CheckOrientation(p, n).Inconsistent());
+}
+
 TEST(CheckOrientation, FlippedNormalsAreFound) {
   const auto points = ReadPoints(DataFile("sphere926.pwn"));
   ASSERT_TRUE(points.has_value());

@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "palpa/field/point_io.h"
+#include "palpa/field/samples.h"
 #include "palpa/field/transform.h"
 #include "test_util.h"
 
@@ -456,6 +457,56 @@ TEST(Transform, FitsLongestSideAndCentres) {
   EXPECT_TRUE(device.positions[0].isApprox(Eigen::Vector3d(-0.03, -0.015, -0.0075), 1e-12));
   EXPECT_TRUE(device.positions[1].isApprox(Eigen::Vector3d(0.03, -0.015, -0.0075), 1e-12));
   EXPECT_EQ(device.normals, points.normals);
+}
+
+// Issue 20: degenerate samples are kept by the reader on request and dropped before the build,
+// counted, the first of each kind named by its line (.xyz) or vertex (PLY).
+TEST(DropDegenerateSamples, BadNormalsAndExactDuplicatesAreDroppedAndNamed) {
+  const TempFile file("scan.xyz",
+                      "0 0 0 1 0 0\n"
+                      "1 0 0 0 0 0\n"  // line 2: zero normal
+                      "# comment\n"
+                      "0 1 0 0 0 3\n"    // line 4
+                      "0 0 1 inf 0 0\n"  // line 5: non-finite normal
+                      "0 1 0 0 1 0\n"    // line 6: duplicate of line 4 (another normal)
+                      "0 0 2 0 0 1\n"
+                      "0 0 0 1 0 0\n"  // line 8: duplicate of line 1
+                      "2 0 0 1 0 0\n");
+  EXPECT_FALSE(ReadPoints(file.path()).has_value());  // the default stays strict
+  auto points = ReadPoints(file.path(), ReadOptions{.keep_bad_normals = true});
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  ASSERT_EQ(points->positions.size(), 8u);
+  EXPECT_EQ(points->normals[1], Eigen::Vector3d::Zero());
+  EXPECT_EQ(points->normals[3], Eigen::Vector3d::Zero());
+  EXPECT_EQ(points->lines, (std::vector<std::size_t>{1, 2, 4, 5, 6, 7, 8, 9}));
+  const DroppedSamples d = DropDegenerateSamples(*points, "scan.xyz");
+  EXPECT_EQ(d.bad_normals, 2u);
+  EXPECT_EQ(d.duplicates, 2u);
+  EXPECT_EQ(d.kept, 4u);
+  EXPECT_EQ(d.Describe(),
+            "2 samples with a zero-length or non-finite normal (first: scan.xyz:2) and 2 exact duplicates (first: "
+            "scan.xyz:6, the position of scan.xyz:4)");
+  EXPECT_EQ(points->positions, (std::vector<Eigen::Vector3d>{{0, 0, 0}, {0, 1, 0}, {0, 0, 2}, {2, 0, 0}}));
+  EXPECT_EQ(points->normals, (std::vector<Eigen::Vector3d>{{1, 0, 0}, {0, 0, 1}, {0, 0, 1}, {1, 0, 0}}));
+  EXPECT_EQ(points->lines, (std::vector<std::size_t>{1, 4, 7, 9}));
+  // A clean set is untouched.
+  const DroppedSamples none = DropDegenerateSamples(*points, "scan.xyz");
+  EXPECT_EQ(none.Total(), 0u);
+  EXPECT_EQ(none.Describe(), "");
+  EXPECT_EQ(points->positions.size(), 4u);
+}
+
+TEST(DropDegenerateSamples, PlyPointsAreNamedByVertex) {
+  const TempFile file("scan.ply",
+                      "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+                      "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n"
+                      "0 0 0 1 0 0\n1 0 0 1 0 0\n0 1 0 0 0 0\n0 0 1 0 0 1\n1 1 1 1 0 0\n");
+  EXPECT_FALSE(ReadPoints(file.path()).has_value());
+  auto points = ReadPoints(file.path(), ReadOptions{.keep_bad_normals = true});
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  const DroppedSamples d = DropDegenerateSamples(*points, "scan.ply");
+  EXPECT_EQ(d.Describe(), "1 sample with a zero-length or non-finite normal (first: scan.ply: vertex 2)");
+  EXPECT_EQ(points->positions.size(), 4u);
 }
 
 }  // namespace

@@ -399,7 +399,7 @@ void ThinPlatePasses(bool v2) {
                 v2 ? "v2" : "v1", speed, total.tunnelled, total.passes, total.min_phi_voxels);
     EXPECT_EQ(total.passes, 10000);
     EXPECT_EQ(total.tunnelled, 0);
-    EXPECT_GE(total.min_phi_voxels, -0.125 - 1e-4);  // rests at φ ≥ −δ/2
+    EXPECT_GE(total.min_phi_voxels, -0.25 - 1e-4);  // rests at φ ≥ −δ (a leaving march's ends; contact −δ/2)
   }
 }
 
@@ -417,7 +417,7 @@ TEST(Proxy, HeldHipConvergesWithoutSampling) {
   }
   EXPECT_TRUE(r.contact);
   EXPECT_TRUE(r.converged);
-  EXPECT_EQ(r.iterations, 0);  // φ and ∇φ at the proxy are carried over; nothing to sample
+  EXPECT_EQ(r.iterations, 0);  // φ and ∇φ at the proxy are carried over (only φ(X_h) is sampled)
 }
 
 // A HIP pushed right through a thin tube (radius 3 voxels, along z) and on, 12 voxels beyond
@@ -558,7 +558,7 @@ TEST(Proxy, OutputBitsAreAFunctionOfInputBitsGolden) {
   const std::uint64_t h = ScriptedRunHash();
   std::printf("[ measured ] scripted run hash 0x%016llx\n", static_cast<unsigned long long>(h));
   EXPECT_EQ(h, ScriptedRunHash()) << "not even deterministic on one machine";
-  EXPECT_EQ(h, 0x5ec42eec91de443eULL) << "golden changed: the tick's arithmetic or control flow changed";
+  EXPECT_EQ(h, 0x663b5e2396002067ULL) << "golden changed: the tick's arithmetic or control flow changed";
 }
 
 TEST(Proxy, SamplingCachesChangeNoOutputBit) {
@@ -587,6 +587,237 @@ TEST(ProxyParams, RejectsOutOfRangeValuesAtStartUp) {
   EXPECT_TRUE(MakeProxyParams({.mu_static = 0.5, .mu_dynamic = 0.3}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.max_iterations = 4, .settle_samples = 5}, kVoxel).has_value());
   EXPECT_FALSE(MakeProxyParams({.max_iterations = 4, .gradient_samples = 0}, kVoxel).has_value());
+}
+
+}  // namespace
+}  // namespace palpa::proxy
+
+// ---------------------------------------------------------------- issue 19: real hands
+
+namespace palpa::proxy {
+namespace {
+
+std::int64_t Raw2(const TickResult& r) {
+  std::int64_t s = 0;
+  for (const auto& f : r.force) s += std::int64_t{f.value.raw()} * f.value.raw();
+  return s;
+}
+
+// min φ (voxels) along [a, b], sampled every 1/16 voxel in the sampler's own field.
+double MinPhiAlong(const World& w, GridPos a, GridPos b) {
+  const double dx = b.x - a.x, dy = b.y - a.y, dz = b.z - a.z;
+  const int n = 1 + static_cast<int>(std::sqrt(dx * dx + dy * dy + dz * dz) / 4096.0);
+  double m = 1e9;
+  for (int i = 0; i <= n; ++i) {
+    const double s = static_cast<double>(i) / n;
+    m = std::min(m, w.PhiVoxels({static_cast<std::int32_t>(a.x + s * dx), static_cast<std::int32_t>(a.y + s * dy),
+                                 static_cast<std::int32_t>(a.z + s * dz)}));
+  }
+  return m;
+}
+
+// Item 1: the proxy holds only when the way to the HIP runs into the object. Strokes that press
+// into the sphere and leave it tangentially, 5 mm/s to 0.6 m/s (a fast one leaves the proxy behind,
+// the HIP outside the sphere but behind the proxy's tangent plane): no force on any tick where the
+// HIP is outside and the straight way from the proxy is clear, i.e. never deeper than where the
+// proxy rests (or the surface) by more than δ/4.
+TEST(ProxyHands, NoForceWhileTheHipIsOutsideAndTheWayIsClear) {
+  World w = Sphere();
+  const double r0 = kRadiusVoxels * kVoxel;
+  std::mt19937 rng(19);
+  int checked = 0, forced = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const Vec3 n = Unit(rng);
+    Vec3 t = Unit(rng);
+    const double dot = Dot(t, n);
+    t = {t[0] - dot * n[0], t[1] - dot * n[1], t[2] - dot * n[2]};
+    const double lt = Norm(t);
+    t = {t[0] / lt, t[1] / lt, t[2] / lt};
+    const double depth = 0.2e-3 + 1.8e-3 * (trial % 10) / 9.0;
+    ProxyState state;
+    for (int k = 0; k < 1400; ++k) {
+      // 200 ticks pressing in, then a straight tangential stroke at 5 mm/s–0.6 m/s out of the sphere.
+      const double press = std::min(k, 200) / 200.0;
+      const double along = k < 200 ? 0 : (k - 200) * (5e-6 + 595e-6 * std::pow((trial % 7) / 6.0, 2));
+      const double rr = r0 + 1e-3 - (1e-3 + depth) * press;
+      const Vec3 x = {rr * n[0] + along * t[0], rr * n[1] + along * t[1], rr * n[2] + along * t[2]};
+      const GridPos hip = w.frame.ToGrid(x);
+      const TickResult r = ProxyTick(w.field, w.params, state, hip);
+      if (w.PhiVoxels(hip) < 0) continue;
+      if (MinPhiAlong(w, r.proxy, hip) < std::min(w.PhiVoxels(r.proxy), 0.0) - 0.0625) continue;
+      ++checked;
+      if (Raw2(r) != 0) {
+        ++forced;
+        ADD_FAILURE() << "trial " << trial << " tick " << k << ": " << Norm(ForceN(r)) << " N with the way clear";
+        break;
+      }
+    }
+  }
+  std::printf("[ measured ] %d ticks with the HIP outside and the way clear, %d with a force\n", checked, forced);
+  EXPECT_GT(checked, 5000);
+  EXPECT_EQ(forced, 0);
+}
+
+// Item 2: a hand that overpowers the device and pushes right through a 16 mm sphere and out of its
+// far side, at 0.3 and 1 m/s, then holds there. While the HIP is inside, the force never drops to
+// zero; it never steps by more than the spring's ends move (k·(|ΔX_h| + |ΔX_p|)) plus the fade
+// rate max_force/1024; the proxy stays on the entry side, never deeper than −δ; beyond the far
+// side the held pull fades to zero within 1.1 s (not a sustained 8 N through the object).
+TEST(ProxyHands, PassThroughAWholeObjectHasNoStepAndTheHeldPullFades) {
+  World w = Sphere();
+  const double r0 = kRadiusVoxels * kVoxel;
+  const double k_voxel = w.params.k.value.ToDouble();
+  const double fade = (w.params.max_force.value.raw() >> 10) / 65536.0;
+  for (const double speed : {0.3, 1.0}) {
+    for (const double offset : {0.0, 0.3, 2.0}) {  // mm off the centre line
+      ProxyState state;
+      TickResult prev;
+      GridPos prev_hip{}, prev_proxy{};
+      const double start = r0 + 2e-3, end = -(r0 + 3e-3);
+      const int travel = static_cast<int>((start - end) / (speed * 1e-3));
+      int inside_ticks = 0, drops = 0, steps = 0, faded_at = -1;
+      bool touched = false;
+      for (int k = 0; k < travel + 1500; ++k) {
+        const double z = start + (end - start) * std::min(k, travel) / travel;
+        const GridPos hip = w.frame.ToGrid({offset * 1e-3, 0.0, z});
+        const TickResult r = ProxyTick(w.field, w.params, state, hip);
+        const double phi_h = w.PhiVoxels(hip);
+        ASSERT_GE(w.PhiVoxels(r.proxy), -0.25) << speed << " " << offset << " tick " << k;
+        // On the centre line (an unstable equilibrium) the proxy stays on the entry side; off it, it
+        // slides round the surface towards the HIP (never through: φ(proxy) ≥ −δ above).
+        if (offset == 0.0) {
+          ASSERT_GE(w.frame.ToMetres(r.proxy)[2], -1e-4) << "proxy on the far side, tick " << k;
+        }
+        touched = touched || r.contact;
+        if (touched && phi_h < 0) {
+          ++inside_ticks;
+          if (!r.contact) ++drops;
+        }
+        if (k > 0) {
+          const auto d = [](GridPos a, GridPos b) {
+            return std::sqrt(std::pow(a.x - b.x, 2.0) + std::pow(a.y - b.y, 2.0) + std::pow(a.z - b.z, 2.0)) / 65536.0;
+          };
+          const double df = Norm(Sub(ForceN(r), ForceN(prev)));
+          const bool release = !r.contact && phi_h >= 0;
+          if (!release && df > k_voxel * (d(hip, prev_hip) + d(r.proxy, prev_proxy)) + fade + 1e-4) {
+            ++steps;
+            ADD_FAILURE() << speed << " m/s offset " << offset << " tick " << k << ": step " << df << " N";
+          }
+        }
+        if (k > travel && faded_at < 0 && !r.contact) faded_at = k - travel;
+        prev = r, prev_hip = hip, prev_proxy = r.proxy;
+      }
+      std::printf(
+          "[ measured ] through at %.1f m/s, %.1f mm off centre: %d ticks inside, %d drops, %d steps, pull "
+          "gone %d ticks after the far side\n",
+          speed, offset, inside_ticks, drops, steps, faded_at);
+      EXPECT_GT(inside_ticks, 0);
+      EXPECT_EQ(drops, 0);
+      EXPECT_EQ(steps, 0);
+      EXPECT_GE(faded_at, 0) << "a sustained pull through the object";
+      EXPECT_LE(faded_at, 1100);
+    }
+  }
+}
+
+// Item 3: a plate 6 voxels thick that reaches the grid's faces (φ < 0 on them). A hand that comes
+// from outside the grid, level with the plate, and moves in through the face: the proxy meets the
+// plate's extension as a wall (a force) and never enters the plate (φ(proxy) ≥ −δ, sampled inside
+// the grid, where the old background made the outside free space).
+TEST(ProxyHands, ThePlateIsNotEnteredThroughAGridFace) {
+  constexpr std::uint32_t n = 40;
+  const double c = 0.5 * (n - 1);
+  World w(testing::AnalyticBlob({n, n, n}, kVoxel, 6, [=](double, double, double k) { return std::abs(k - c) - 3; }));
+  const double last = (n - 1) * kVoxel, half = 0.5 * last;
+  ProxyState state;
+  int forced = 0;
+  double deepest = 1e9;
+  // From 8 voxels beyond the +x face and 6 voxels above the plate, down to 1 voxel inside the
+  // plate's top (still outside the grid), then in along −x to the grid's centre.
+  const Vec3 a = {last + 8 * kVoxel - half, 0, 6 * kVoxel}, b = {last + 8 * kVoxel - half, 0, 2 * kVoxel},
+             e = {0, 0, 2 * kVoxel};
+  for (int k = 0; k <= 1000; ++k) {
+    const double s = std::min(k, 200) / 200.0, u = std::max(0, k - 200) / 800.0;
+    const Vec3 x = {a[0] + (b[0] - a[0]) * s + (e[0] - b[0]) * u, 0, a[2] + (b[2] - a[2]) * s};
+    const TickResult r = ProxyTick(w.field, w.params, state, w.frame.ToGrid(x));
+    // φ at the proxy's nearest grid point: the field inside the grid, whatever the sampler says outside.
+    const GridPos p = r.proxy;
+    const auto cl = [&](std::int32_t v) { return std::clamp<std::int32_t>(v, 0, (n - 1) << 16); };
+    deepest = std::min(deepest, w.PhiVoxels({cl(p.x), cl(p.y), cl(p.z)}));
+    forced += r.contact ? 1 : 0;
+  }
+  std::printf("[ measured ] entering through a face: deepest proxy %.3f voxel, %d ticks with a force\n", deepest,
+              forced);
+  EXPECT_GE(deepest, -0.25);
+  EXPECT_GT(forced, 500);
+}
+
+// Item 4 (issue 18, finding 3): the clamp rounds towards zero, so Σ f_i² ≤ max_force² exactly, in
+// integers. k = 1e5 N/m (20 N/voxel: one LSB of |u| is 3e-4 N, where the old rounding overshot to
+// 8.0003 N) and 800 N/m, max force 8 N and 0.5 N, HIP pressed deep under a tilted plane.
+TEST(ProxyHands, ClampNeverExceedsTheMaximumForceByOneBit) {
+  const double c = 31.5;
+  const Vec3 nrm = {0.36, 0.48, 0.8};  // unit: 0.36² + 0.48² + 0.8² = 1
+  for (const double k : {800.0, 1e5}) {
+    for (const double max_f : {8.0, 0.5}) {
+      ProxyConfig cfg;
+      cfg.k_n_per_m = k;
+      cfg.max_force_n = max_f;
+      World w(testing::AnalyticBlob({64, 64, 64}, kVoxel, 6,
+                                    [&](double i, double j, double kk) {
+                                      return nrm[0] * (i - c) + nrm[1] * (j - c) + nrm[2] * (kk - c);
+                                    }),
+              cfg);
+      const std::int64_t max_raw = w.params.max_force.value.raw();
+      std::mt19937 rng(4);
+      std::uniform_real_distribution<double> off(-3e-3, 3e-3), dep(0.02e-3, 4e-3);
+      int clamped = 0;
+      std::int64_t worst = 0;
+      for (int trial = 0; trial < 200; ++trial) {
+        ProxyState state;
+        const double ox = off(rng), oy = off(rng), d = dep(rng);
+        const Vec3 base = {ox, oy, -(nrm[0] * ox + nrm[1] * oy) / nrm[2]};  // on the plane
+        for (int t = 0; t <= 40; ++t) {
+          const double s = 1.5e-3 - (1.5e-3 + d) * std::min(t, 30) / 30.0;  // from 1.5 mm out to d in
+          const TickResult r =
+              ProxyTick(w.field, w.params, state,
+                        w.frame.ToGrid({base[0] + s * nrm[0], base[1] + s * nrm[1], base[2] + s * nrm[2]}));
+          worst = std::max(worst, Raw2(r) - max_raw * max_raw);
+          clamped += r.clamped ? 1 : 0;
+        }
+      }
+      std::printf("[ measured ] k %g N/m, max %g N: %d clamped ticks, worst Σf² − max² = %lld LSB²\n", k, max_f,
+                  clamped, static_cast<long long>(worst));
+      if (k * 4e-3 > max_f) {
+        EXPECT_GT(clamped, 100);  // 4 mm deep at most
+      }
+      EXPECT_LE(worst, 0) << "k " << k << " max " << max_f;
+    }
+  }
+  // Hand-computed: u = X_p − X_h = (3, 4, 12) voxels, |u| = 13; k·h = 800 N/m · 0.2 mm = 0.16 N/voxel
+  // = 10486 raw (Q16.16). Clamped to 0.5 N (32768 raw): ⌊32768·u_i/13⌋ = 7561, 10082, 30247 (to
+  // nearest, 7562.) and Σ² = 1,073,696,454 ≤ 32768². Unclamped at 8 N: 10486·u_i = 31458, 41944,
+  // 125832 raw (2.08 N).
+  ProxyConfig cfg;
+  cfg.k_n_per_m = 800;
+  cfg.max_force_n = 0.5;
+  const ProxyParams p05 = MakeProxyParams(cfg, kVoxel).value();
+  cfg.max_force_n = 8;
+  const ProxyParams p8 = MakeProxyParams(cfg, kVoxel).value();
+  ASSERT_EQ(p05.k.value.raw(), 10486);
+  const GridPos hip{5 << 16, 6 << 16, 7 << 16}, proxy{8 << 16, 10 << 16, 19 << 16};
+  const auto f05 = SpringForce(p05, proxy, hip);
+  EXPECT_EQ(f05[0].value.raw(), 7561);
+  EXPECT_EQ(f05[1].value.raw(), 10082);
+  EXPECT_EQ(f05[2].value.raw(), 30247);
+  const auto f8 = SpringForce(p8, proxy, hip);
+  EXPECT_EQ(f8[0].value.raw(), 31458);
+  EXPECT_EQ(f8[1].value.raw(), 41944);
+  EXPECT_EQ(f8[2].value.raw(), 125832);
+  // And pointing the other way (towards zero is not towards −∞): u = (−3, −4, −12).
+  const auto fn = SpringForce(p05, hip, proxy);
+  EXPECT_EQ(fn[0].value.raw(), -7561);
+  EXPECT_EQ(fn[2].value.raw(), -30247);
 }
 
 }  // namespace

@@ -114,33 +114,37 @@ TEST(Interpolate, MatchesFloat64TrilinearWithin1e3Voxel) {
   EXPECT_LE(worst, 2.0 / 65536);  // the rounding analysis in docs/realtime-core.md: ≤ 1.5 LSB
 }
 
-TEST(Sampler, OutsideTheGridIsBackgroundAtEveryFaceEdgeAndCorner) {
+TEST(Sampler, OutsideTheGridIsTheBoundaryExtendedOutwardAtEveryFaceEdgeAndCorner) {
+  // Outside the grid φ is the value at the nearest grid point (issue 19: a face where φ < 0 must
+  // not read as free space), and the gradient loses its components along the clamped axes.
   const auto bytes = testing::SphereBlob(6, 0.001, 4, 2.0);
   const auto view = blob::Verify(bytes).value();
   const TrilinearSampler s(view);
   const std::int32_t last = 5 * kOne;
   const std::int32_t coords[] = {INT32_MIN, -1, 0, 2 * kOne + 123, last, last + 1, INT32_MAX};
-  int outside = 0;
+  const auto clamp = [&](std::int32_t v) { return std::clamp(v, 0, last); };
+  int outside = 0, not_background = 0;
   for (std::int32_t x : coords)
     for (std::int32_t y : coords)
       for (std::int32_t z : coords) {
         const bool in = x >= 0 && x <= last && y >= 0 && y <= last && z >= 0 && z <= last;
         const GridPos p{x, y, z};
-        for (const Sample& a : {s.At(p), s.AtCellGradient(p)}) {
-          EXPECT_EQ(a.in_grid, in) << x << "," << y << "," << z;
-          if (!in) {
-            EXPECT_EQ(a.phi, 4 * kOne);
-            EXPECT_EQ(a.grad[0] | a.grad[1] | a.grad[2], 0);
-          }
-        }
+        const Sample a = s.At(p);
+        EXPECT_EQ(a.in_grid, in) << x << "," << y << "," << z;
+        EXPECT_EQ(s.Phi(p), a.phi);
         if (!in) {
           ++outside;
-          EXPECT_EQ(s.Phi(p), 4 * kOne);
-        } else {
-          EXPECT_EQ(s.Phi(p), s.At(p).phi);
+          const GridPos q{clamp(x), clamp(y), clamp(z)};
+          const Sample b = s.At(q);
+          EXPECT_EQ(a.phi, b.phi) << x << "," << y << "," << z;
+          EXPECT_EQ(a.grad[0], q.x == x ? b.grad[0] : 0);
+          EXPECT_EQ(a.grad[1], q.y == y ? b.grad[1] : 0);
+          EXPECT_EQ(a.grad[2], q.z == z ? b.grad[2] : 0);
+          not_background += a.phi != 4 * kOne ? 1 : 0;
         }
       }
   EXPECT_EQ(outside, 7 * 7 * 7 - 3 * 3 * 3);
+  EXPECT_GT(not_background, 0);  // the sphere's faces are within the band: not the background
   // Exactly on the last node: the node's own value.
   EXPECT_EQ(s.At({last, last, last}).phi, view.phi[6 * 6 * 6 - 1]);
   EXPECT_EQ(s.Phi({0, 0, 0}), view.phi[0]);

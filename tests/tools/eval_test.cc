@@ -1,5 +1,6 @@
 // palpa eval: true distances (analytic sphere; CGAL on meshes checked against analytic boxes and
 // spheres and against per-node exact queries) and the score, on fields with known errors.
+#include <fmt/core.h>
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 #include <nlohmann/json.hpp>
@@ -222,6 +223,74 @@ TEST(TrueDistances, IcosphereMeshAgreesWithTheAnalyticSphere) {
   EXPECT_EQ(r->gross_wrong_sign, 0u);
 }
 
+// Issue 20: wrong signs far from the surface (phantom solid in free air, holes deep inside) are
+// counted apart from the band figures, with their exact depth, whether the truth's stored
+// distances reach them (the analytic sphere) or not (a mesh: exact only within 3 voxels).
+TEST(Eval, FarWrongSignsArePhantomSolidAndHolesWithTheirDepth) {
+  const BlobSpec s = SphereSpec();
+  const Eigen::Vector3d centre = s.fit_offset_m;
+  const Eigen::Vector3d phantom_centre = centre + Eigen::Vector3d(27e-3, 0, 0);
+  const auto planted_phantom = [&](const Eigen::Vector3d& x) { return (x - phantom_centre).norm() < 3e-3; };
+  const auto planted_hole = [&](const Eigen::Vector3d& x) { return (x - centre).norm() < 5e-3; };
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) {
+    const double t = SphereSdfVoxels(s, x);
+    return planted_phantom(x) || planted_hole(x) ? -t : t;
+  });
+  std::size_t phantoms = 0;
+  std::size_t holes = 0;
+  double phantom_depth = 0;
+  double hole_depth = 0;
+  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
+    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
+      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
+        const Eigen::Vector3d x = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
+        const double t = SphereSdfVoxels(s, x);
+        if (planted_phantom(x)) ++phantoms, phantom_depth = std::max(phantom_depth, t);
+        if (planted_hole(x)) ++holes, hole_depth = std::max(hole_depth, -t);
+      }
+  ASSERT_GT(phantoms, 50u);
+  ASSERT_GT(holes, 200u);
+  const blob::FieldView view = View(bytes);
+  for (const Truth& truth : {Truth::Sphere(kSphereRadiusModel), Truth::Mesh(Icosphere(5, kSphereRadiusModel))}) {
+    auto r = mesh::Evaluate(view, truth);
+    ASSERT_TRUE(r) << r.error().message;
+    EXPECT_EQ(r->phantom_solid.nodes, phantoms);
+    EXPECT_EQ(r->holes.nodes, holes);
+    EXPECT_EQ(r->far_wrong(), phantoms + holes);
+    // The band score alone cannot tell this field from the exact one (the mesh's chords put a
+    // few nodes at the surface on the other side of the analytic sphere, in both).
+    const auto exact = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+    auto e = mesh::Evaluate(View(exact), truth);
+    ASSERT_TRUE(e) << e.error().message;
+    EXPECT_EQ(r->wrong_sign_in_band, e->wrong_sign_in_band);
+    EXPECT_EQ(r->mean_abs_error, e->mean_abs_error);
+    // The mesh's chords lie within 0.01 voxel of the sphere.
+    EXPECT_NEAR(r->phantom_solid.deepest_voxels, phantom_depth, 0.01);
+    EXPECT_NEAR(r->holes.deepest_voxels, hole_depth, 0.01);
+    EXPECT_GT(r->phantom_solid.deepest_voxels, 7.0);
+    EXPECT_NEAR((r->phantom_solid.deepest_at_m - phantom_centre).norm(), 3e-3, 1e-3);
+    EXPECT_LT((r->holes.deepest_at_m - centre).norm(), 1e-3);
+  }
+  // Wrong signs between 2 and 3 voxels out are not far, even when the truth is exact only within
+  // 2 voxels (palpa eval's truth on a default v2 blob) and reads them as +∞.
+  const auto shell = MakeBlob(s, [&](const Eigen::Vector3d& x) {
+    const double t = SphereSdfVoxels(s, x);
+    return planted_phantom(x) || (t > 2.05 && t < 2.95) ? -t : t;
+  });
+  mesh::EvalOptions two;
+  two.band_voxels = 2;
+  auto near_shell = mesh::Evaluate(View(shell), Truth::Mesh(Icosphere(5, kSphereRadiusModel)), two);
+  ASSERT_TRUE(near_shell) << near_shell.error().message;
+  EXPECT_EQ(near_shell->phantom_solid.nodes, phantoms);
+  EXPECT_GT(near_shell->gross_wrong_sign, phantoms + 1000);
+  // A clean field has none.
+  const auto clean = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  auto r = mesh::Evaluate(View(clean), Truth::Mesh(Icosphere(5, kSphereRadiusModel)));
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ(r->far_wrong(), 0u);
+  EXPECT_EQ(r->phantom_solid.deepest_voxels, 0.0);
+}
+
 TEST(Eval, RefusesMismatchedGridsAndBands) {
   const BlobSpec s = SphereSpec();
   const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
@@ -297,11 +366,42 @@ TEST_F(EvalCli, SphereAndMeshTruthsAsAUserRunsThem) {
   EXPECT_NEAR(JsonNumber(r.out, "mean_signed_error"), 0.5, 1e-4) << r.out;
   EXPECT_NEAR(JsonNumber(r.out, "max_abs_error"), 0.5, 1e-4) << r.out;
   EXPECT_EQ(JsonNumber(r.out, "gross_wrong_sign"), 0) << r.out;
+  EXPECT_EQ(JsonNumber(r.out, "far_wrong"), 0) << r.out;
   // The same sphere as a tessellated mesh file (model units) gives the same score to the sagitta.
   const std::string off = Write("sphere.off", ToOff(Icosphere(5, kSphereRadiusModel)));
   const Outcome m = Palpa("eval " + field + " --mesh " + off);
   ASSERT_EQ(m.code, 0) << m.out;
   EXPECT_NE(m.out.find("mean signed error   +0.49"), std::string::npos) << m.out;
+}
+
+// palpa eval prints the far wrong-sign nodes beside the band figures, in text and --json.
+TEST_F(EvalCli, ReportsPhantomSolidAndHoles) {
+  const BlobSpec s = SphereSpec();
+  const Eigen::Vector3d phantom_centre = s.fit_offset_m + Eigen::Vector3d(27e-3, 0, 0);
+  const std::string field = Path("phantom.palpa");
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) {
+    const double t = SphereSdfVoxels(s, x);
+    return (x - phantom_centre).norm() < 3e-3 ? -t : t;
+  });
+  {
+    std::ofstream(field, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  }
+  const Outcome j = Palpa("eval " + field + " --sphere 10 --json");
+  ASSERT_EQ(j.code, 0) << j.out;
+  const auto json = nlohmann::json::parse(j.out, nullptr, false);
+  ASSERT_FALSE(json.is_discarded()) << j.out;
+  const double phantoms = json["score"]["phantom_solid"]["nodes"].get<double>();
+  EXPECT_GT(phantoms, 50) << j.out;
+  EXPECT_EQ(JsonNumber(j.out, "far_wrong"), phantoms) << j.out;
+  EXPECT_EQ(json["score"]["holes"]["nodes"].get<double>(), 0) << j.out;
+  EXPECT_GT(json["score"]["phantom_solid"]["deepest_voxels"].get<double>(), 7) << j.out;
+  const Outcome t = Palpa("eval " + field + " --sphere 10");
+  ASSERT_EQ(t.code, 0) << t.out;
+  EXPECT_NE(t.out.find(fmt::format("far wrong sign      {} nodes with |true| > 3 voxels", phantoms)), std::string::npos)
+      << t.out;
+  EXPECT_NE(t.out.find(fmt::format("phantom solid     {} nodes, deepest", phantoms)), std::string::npos) << t.out;
+  EXPECT_NE(t.out.find("holes             0 nodes"), std::string::npos) << t.out;
 }
 
 TEST_F(EvalCli, BadInputsExitTwo) {

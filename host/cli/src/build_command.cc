@@ -8,15 +8,18 @@
 #include <cstring>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <fmt/core.h>
 
 #include "atomic_file.h"
 #include "commands.h"
+#include "grid_faces.h"
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
 #include "palpa/field/point_io.h"
+#include "palpa/field/samples.h"
 
 namespace palpa::cli {
 namespace {
@@ -69,6 +72,9 @@ std::uint32_t Crc32cFast(std::span<const std::byte> data, std::uint32_t crc) {
   return blob::Crc32c(data, crc);
 }
 
+// As field::BuildField's minimum.
+constexpr std::size_t kMinUsableSamples = 4;
+
 }  // namespace
 
 int RunBuild(const BuildArgs& args) {
@@ -80,10 +86,38 @@ int RunBuild(const BuildArgs& args) {
 
   // Before any work: a build can take minutes, and its target must not be a device or the input.
   if (const int refused = CheckOutput("build", args.output, {args.points}); refused != kExitOk) return refused;
-  auto points = field::ReadPoints(args.points);
+  // Degenerate samples are dropped here, after reading, and named (issue 20): a real scan with a
+  // few zero normals must not be refused whole. --strict refuses them.
+  auto points = field::ReadPoints(args.points, field::ReadOptions{.keep_bad_normals = true});
   if (!points) {
     fmt::print(stderr, "palpa build: {}\n", points.error().message);
     return kExitBadInput;
+  }
+  const field::DroppedSamples dropped = field::DropDegenerateSamples(*points, args.points);
+  if (dropped.Total() > 0) {
+    if (args.strict) {
+      fmt::print(stderr, "palpa build: {}: --strict: {}\n", args.points, dropped.Describe());
+      return kExitBadInput;
+    }
+    if (dropped.kept < kMinUsableSamples) {
+      fmt::print(stderr, "palpa build: {}: {} usable samples after dropping {}; at least {} are needed\n", args.points,
+                 dropped.kept, dropped.Describe(), kMinUsableSamples);
+      return kExitBadInput;
+    }
+    fmt::print(stderr, "palpa build: warning: {}: dropped {}; {} samples remain (--strict refuses such files)\n",
+               args.points, dropped.Describe(), dropped.kept);
+  }
+  // Stray samples and outliers are ignored before the fit (one point at 1e30 must not collapse
+  // --fit) and before the build (each would make solid of its own: a phantom wall).
+  const field::StraySamples stray = field::FindStraySamples(points->positions, points->normals);
+  if (!stray.indices.empty()) {
+    fmt::print(stderr,
+               "palpa build: warning: {}: ignored {} sample{} that {} neighbours do not support (off their "
+               "surface or isolated); the farthest: {}, {:.3g} sample spacings off\n",
+               args.points, stray.indices.size(), stray.indices.size() == 1 ? "" : "s",
+               stray.indices.size() == 1 ? "its" : "their", field::PointPlace(args.points, *points, *stray.farthest),
+               stray.farthest_spacings);
+    field::RemoveSamples(*points, stray.indices);
   }
   const field::Transform transform =
       args.scale ? field::Transform{*args.scale, Eigen::Vector3d(args.offset_m[0], args.offset_m[1], args.offset_m[2])}
@@ -117,6 +151,22 @@ int RunBuild(const BuildArgs& args) {
                args.points, built.orientation.Describe());
   }
 
+  // Issue 20: say when the scan is open (the winding number closed a surface where no sample
+  // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
+  {
+    const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+    const double closed = built.hermite.closed_area_m2 / (transform.scale * transform.scale);  // model units^2
+    if (built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0) {
+      fmt::print(
+          stderr,
+          "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it by the "
+          "winding number of the samples over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
+          args.points, built.hermite.closed_area_m2 * 1e6, closed,
+          built.hermite.face_nodes_closed > 0
+              ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
+              : std::string());
+    }
+  }
   const field::GridSpec& g = built.field.grid();
   blob::BlobMeta meta;
   for (std::size_t a = 0; a < 3; ++a) {
@@ -141,6 +191,11 @@ int RunBuild(const BuildArgs& args) {
   auto blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
   const std::span<std::int32_t> payload(blob_words.get() + kHeaderWords, nodes);
   built.field.WriteQ16(payload);
+  if (const std::size_t n = NegativeFaceNodes(std::span<const std::int32_t>(payload), g.dims); n > 0)
+    fmt::print(stderr,
+               "palpa build: warning: {}: the field touches its grid boundary (φ < 0 on {} face nodes); palpad treats "
+               "those faces as walls\n",
+               args.points, n);
   std::vector<std::byte> v2;
   if (args.format == 2) {
     // Blob v2: the dense values above, clamped to the asymmetric band and packed into bricks.

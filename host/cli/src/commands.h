@@ -29,6 +29,7 @@ struct BuildArgs {
   std::string method = "erosion";
   int threads = 0;  ///< 0: all cores
   bool quiet = false;
+  bool strict = false;  ///< refuse degenerate samples instead of dropping them (issue 20)
 };
 int RunBuild(const BuildArgs& args);
 
@@ -55,6 +56,19 @@ struct TraceSynthArgs {
   int button_bit = 0;                 ///< 0..7 (Falcon grip: 0-3)
 };
 int RunTraceSynth(const TraceSynthArgs& args);
+
+/// `palpa trace import`: a recorded `t_s,x_m,y_m,z_m` CSV (third-party recordings, any extent)
+/// scaled uniformly about its bounding-box centre into the device workspace, as a v2 trace.
+struct TraceImportArgs {
+  std::string input;             ///< CSV: header line `t_s,x_m,y_m,z_m`, then rows, s and m
+  std::string output;            ///< .ptb: binary v2, else text v2
+  double scale = 1;              ///< uniform factor applied about the window's bounding-box centre
+  std::vector<double> offset_m;  ///< x,y,z added after scaling (default 0,0,0: the box centre at the origin)
+  double from_s = 0;             ///< window start, s of the recording
+  double duration_s = 0;         ///< window length, s (0: to the end)
+  std::string note;              ///< provenance line(s) kept in the trace's comment
+};
+int RunTraceImport(const TraceImportArgs& args);
 
 // Tools for seeing and scoring a field (issue 5; library: host/mesh, docs/tools.md).
 struct SampleArgs {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <memory>
+#include <string>
 
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
@@ -16,6 +17,18 @@
 
 namespace palpa::cli {
 namespace {
+
+nlohmann::ordered_json FarJson(const mesh::FarWrong& f) {
+  return {{"nodes", f.nodes},
+          {"deepest_voxels", f.deepest_voxels},
+          {"deepest_at_m", {f.deepest_at_m.x(), f.deepest_at_m.y(), f.deepest_at_m.z()}}};
+}
+
+std::string FarLine(const mesh::FarWrong& f) {
+  if (f.nodes == 0) return "0 nodes";
+  return fmt::format("{} nodes, deepest {:.1f} voxels at ({:.6f}, {:.6f}, {:.6f}) m", f.nodes, f.deepest_voxels,
+                     f.deepest_at_m.x(), f.deepest_at_m.y(), f.deepest_at_m.z());
+}
 
 // Every EvalResult field, keys as the member names (units in the name: *_error in voxels,
 // max_error_at_m in metres, *_percent in %).
@@ -30,7 +43,10 @@ nlohmann::ordered_json ScoreJson(const mesh::EvalResult& r) {
           {"wrong_sign_in_band", r.wrong_sign_in_band},
           {"wrong_sign_in_band_percent", r.wrong_sign_in_band_percent},
           {"gross_wrong_sign", r.gross_wrong_sign},
-          {"gross_wrong_sign_percent", r.gross_wrong_sign_percent}};
+          {"gross_wrong_sign_percent", r.gross_wrong_sign_percent},
+          {"far_wrong", r.far_wrong()},
+          {"phantom_solid", FarJson(r.phantom_solid)},
+          {"holes", FarJson(r.holes)}};
 }
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -129,6 +145,9 @@ int RunEval(const EvalArgs& args) {
   fmt::print("  wrong sign in band  {:.3f} % ({} nodes)\n", r.wrong_sign_in_band_percent, r.wrong_sign_in_band);
   fmt::print("  gross wrong sign    {:.4f} % of all {} nodes ({} nodes with |true| > 1 voxel)\n",
              r.gross_wrong_sign_percent, r.nodes, r.gross_wrong_sign);
+  fmt::print("  far wrong sign      {} nodes with |true| > {:g} voxels\n", r.far_wrong(), options.far_beyond_voxels);
+  fmt::print("    phantom solid     {}\n", FarLine(r.phantom_solid));
+  fmt::print("    holes             {}\n", FarLine(r.holes));
   fmt::print("  time                truth {:.3f} s, score {:.3f} s\n", seconds_truth, seconds_score);
   return kExitOk;
 }

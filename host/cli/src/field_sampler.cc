@@ -11,7 +11,8 @@ double FieldSampler::Phi(const Eigen::Vector3d& x_m) const {
   for (int a = 0; a < 3; ++a) {
     g[a] = (x_m[a] - f_.origin_m[static_cast<std::size_t>(a)]) / f_.voxel_m;
     const double last = f_.dims[static_cast<std::size_t>(a)] - 1;
-    if (!(g[a] >= 0 && g[a] <= last)) return f_.band_voxels * f_.voxel_m;
+    if (!(g[a] == g[a])) return f_.band_voxels * f_.voxel_m;  // NaN: free space
+    g[a] = std::clamp(g[a], 0.0, last);  // outside: the boundary value extended outward, as the sampler
     c[a] = std::min(static_cast<std::ptrdiff_t>(g[a]), static_cast<std::ptrdiff_t>(last) - 1);
     g[a] -= static_cast<double>(c[a]);
   }

@@ -12,7 +12,8 @@ class FieldSampler {
  public:
   explicit FieldSampler(const blob::FieldView& field) : f_(field) {}
 
-  /// φ in metres at device point x (background +band·voxel outside the grid).
+  /// φ in metres at device point x (outside the grid: the boundary value extended outward, as
+  /// sampler::TrilinearSampler).
   double Phi(const Eigen::Vector3d& x_m) const;
   /// ∇φ by central differences of the trilinear φ over ±½ voxel (dimensionless).
   Eigen::Vector3d Gradient(const Eigen::Vector3d& x_m) const;

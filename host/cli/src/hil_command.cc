@@ -55,6 +55,7 @@ constexpr double kForceScale = 16777216.0;  // goldens store forces in units of 
 constexpr std::uint32_t kTelemetryFlagEstop = 1u << 1;
 // swap 32, swap ramp 64 (issue 7).
 constexpr std::uint32_t kTelemetryFlagSwap = 1u << 5;
+constexpr std::uint32_t kTelemetryFlagRamp = 1u << 2;
 constexpr std::uint32_t kGoldenFlags = 1u | 2u | 4u | 16u | 32u | 64u;  // all but overrun (wall-clock, paced only)
 
 // ---------------------------------------------------------------- small helpers
@@ -141,7 +142,7 @@ struct FieldSpec {
 
 struct Limits {
   double phi_tolerance_voxels = 0.26;  // proxy never inside: φ(proxy) ≥ −this (δ = 0.25 voxel + rounding)
-  double slope_factor = 2.0;           // |Δf| ≤ factor·k·max|ΔX_h| + slope_floor_n per tick
+  double slope_factor = 2.0;           // |Δf| ≤ factor·k·(|ΔX_h| + |ΔX_p|) + slope_floor_n per tick
   double slope_floor_n = 0.01;
   double energy_tolerance_j = 1e-6;  // passivity: E_n ≥ −B_n − this
 };
@@ -160,6 +161,9 @@ struct Case {
   // Known failures (substrings of failure sentences), each with its reason in cases.toml: reported
   // as "known", not counted; one that no longer occurs is reported so that it gets removed.
   std::vector<std::string> xfail;
+  // A palpad output CSV (relative to the case list) measured instead of a replay: checks the
+  // invariants on a run made elsewhere (and lets tests feed violating runs); never a golden.
+  std::string output;
 };
 
 struct Suite {
@@ -222,6 +226,7 @@ std::expected<Suite, std::string> LoadSuite(const fs::path& cases_path) {
     c.realtime = (*ct)["realtime"].value_or(true);
     c.swap_field = (*ct)["swap_field"].value_or(std::string());
     c.swap_at = (*ct)["swap_at"].value_or(std::int64_t{-1});
+    c.output = (*ct)["output"].value_or(std::string());
     if (c.name.empty() || c.trace.empty() || c.field.empty())
       return std::unexpected(where(node) + ": a case needs name, trace and field");
     // Errors about a key name the key's own line.
@@ -465,6 +470,13 @@ struct Metrics {
   double max_force_n = 0, max_slope_n = 0, slope_limit_n = 0, min_proxy_phi_voxels = 1e9;
   std::size_t releases = 0;  // contact ends with a force above the slope limit (god-object release)
   double max_release_n = 0;
+  // Issue 19: worst |Δf| − limit over the ticks held to the slope limit (≤ 0 passes), the deepest
+  // HIP (its distance from the proxy while inside, mm), holds (runs of ticks with a force and the
+  // HIP outside: the proxy held on a blocked way) and the longest, ticks with a force while the way
+  // is clear, drops to zero with the HIP inside, forces with the proxy off the surface.
+  double worst_slope_excess_n = -1e9, deepest_hip_mm = 0;
+  std::size_t holds = 0, longest_hold_ticks = 0, clear_way_force_ticks = 0, drops_inside = 0,
+              off_surface_force_ticks = 0;
   double energy_j = 0, min_passivity_margin_j = 0;
   double max_hip_step_m = 0;
   // Sphere (analytic) validation, when the case has one.
@@ -486,7 +498,9 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
   }
   m.slope_limit_n = lim.slope_factor * k * m.max_hip_step_m + lim.slope_floor_n;
   double energy = 0, bound = 0;
-  std::size_t worst_phi_tick = 0, worst_slope_tick = 0;
+  std::size_t worst_phi_tick = 0, worst_slope_tick = 0, clear_tick = 0, drop_tick = 0, off_tick = 0;
+  std::size_t hold_run = 0, clear_run = 0;
+  double worst_off_phi = 0;
   // The proxy is not run during an e-stop, and restarts at the HIP after it, following the HIP
   // with zero force until the HIP has been outside once (proxy::ProxyTick): "never inside"
   // holds from then on. Unseated ticks are not checked (a trace starts outside: seated at once).
@@ -509,18 +523,61 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
       m.min_proxy_phi_voxels = phi_voxels;
       worst_phi_tick = i;
     }
+    // Issue 19's invariants, in voxels of the field in force at this tick.
+    const double vox = field_at.voxel_m();
+    const Eigen::Vector3d hip(t.hip[0], t.hip[1], t.hip[2]);
+    const double phi_h = field_at.Phi(hip) / vox;
+    const double fn = f.norm();
+    const bool exempt = (t.flags & (kTelemetryFlagEstop | kTelemetryFlagRamp)) != 0;
+    if (fn > 0 && phi_h < 0) m.deepest_hip_mm = std::max(m.deepest_hip_mm, 1e3 * (hip - proxy).norm());
+    // Held: a force with the HIP outside. Allowed only while the straight way from the proxy runs
+    // into the object: deeper than where the proxy rests (or the surface) by more than δ/4 (δ =
+    // the proxy's depth tolerance, here phi_tolerance); a clear way may keep the force for its
+    // release tick, not two.
+    const bool outside = phi_h >= 0.01;
+    if (fn > 0 && outside && seated && !exempt) {
+      if (++hold_run == 1) ++m.holds;
+      m.longest_hold_ticks = std::max(m.longest_hold_ticks, hold_run);
+      const double floor = std::min(phi_voxels, 0.0) - 0.25 * lim.phi_tolerance_voxels;
+      bool clear = true;
+      const Eigen::Vector3d d = hip - proxy;
+      const int steps = 1 + static_cast<int>(16.0 * d.norm() / vox);  // every 1/16 voxel
+      for (int s = 0; s <= steps && clear; ++s) clear = field_at.Phi(proxy + d * (double(s) / steps)) / vox >= floor;
+      clear_run = clear ? clear_run + 1 : 0;
+      if (clear_run >= 2) {
+        if (m.clear_way_force_ticks++ == 0) clear_tick = i;
+      }
+    } else {
+      hold_run = 0;
+      clear_run = 0;
+    }
+    // The proxy at the surface whenever the force is felt: |φ(proxy)| ≤ ½ voxel (+ rounding).
+    if (fn > 0.05 && seated && !exempt && std::abs(phi_voxels) > 0.51) {
+      if (m.off_surface_force_ticks++ == 0) off_tick = i, worst_off_phi = phi_voxels;
+    }
     if (i > 0) {
       const Tick& p = ticks[i - 1];
       const double slope =
           Eigen::Vector3d(t.force[0] - p.force[0], t.force[1] - p.force[1], t.force[2] - p.force[2]).norm();
-      // A force that ends because contact ends is a release: the god-object proxy leaves the
-      // surface at a silhouette (an edge, or round a thin part the HIP went through) and the
-      // spring is gone at once, as in the model (Zilles & Salisbury 1995). Releases are counted
-      // and reported, not held to the slope limit; every rise and every change within contact is.
-      if (p.contact && !t.contact && slope > m.slope_limit_n) {
+      const double pn = Eigen::Vector3d(p.force[0], p.force[1], p.force[2]).norm();
+      // No drop to zero while the HIP is inside.
+      if (pn > 0 && fn == 0 && phi_h < -0.01 && !exempt && seated) {
+        if (m.drops_inside++ == 0) drop_tick = i;
+      }
+      // A spring changes only as fast as its ends move: |Δf| ≤ factor·k·(|ΔX_h| + |ΔX_p|) + floor.
+      // A force that ends with the HIP outside is a release (the god-object proxy leaves the surface
+      // at a silhouette, or round a part the HIP went through, once the way is clear: Zilles &
+      // Salisbury 1995): counted and reported, not held to the limit. Every rise, every change in
+      // contact and every end with the HIP inside is.
+      const double dh = Eigen::Vector3d(t.hip[0] - p.hip[0], t.hip[1] - p.hip[1], t.hip[2] - p.hip[2]).norm();
+      const double dp =
+          Eigen::Vector3d(t.proxy[0] - p.proxy[0], t.proxy[1] - p.proxy[1], t.proxy[2] - p.proxy[2]).norm();
+      const double limit = lim.slope_factor * k * (dh + dp) + lim.slope_floor_n;
+      if (fn == 0 && pn > 0 && phi_h >= -0.01 && slope > limit) {
         ++m.releases;
         m.max_release_n = std::max(m.max_release_n, slope);
-      } else if (slope > m.max_slope_n) {
+      } else if (!exempt && slope - limit > m.worst_slope_excess_n) {
+        m.worst_slope_excess_n = slope - limit;
         m.max_slope_n = slope;
         worst_slope_tick = i;
       }
@@ -543,9 +600,22 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
   if (m.min_proxy_phi_voxels < -lim.phi_tolerance_voxels)
     m.failures.push_back(fmt::format("proxy inside the object at tick {}: φ = {:.4f} voxel < −{} voxel", worst_phi_tick,
                                      m.min_proxy_phi_voxels, lim.phi_tolerance_voxels));
-  if (m.max_slope_n > m.slope_limit_n)
-    m.failures.push_back(fmt::format("force step {:.4f} N at tick {} exceeds the slope limit {:.4f} N/tick",
-                                     m.max_slope_n, worst_slope_tick, m.slope_limit_n));
+  if (m.worst_slope_excess_n > 0)
+    m.failures.push_back(fmt::format("force step {:.4f} N at tick {} exceeds the slope limit by {:.4f} N",
+                                     m.max_slope_n, worst_slope_tick, m.worst_slope_excess_n));
+  if (m.clear_way_force_ticks > 0)
+    m.failures.push_back(
+        fmt::format("force with the way clear (HIP outside, the straight way from the proxy never "
+                    "below −{:.3f} voxel) on {} ticks beyond the release tick, first at tick {}",
+                    0.5 * lim.phi_tolerance_voxels, m.clear_way_force_ticks, clear_tick));
+  if (m.drops_inside > 0)
+    m.failures.push_back(
+        fmt::format("force dropped to zero with the HIP inside {} times, first at tick {}", m.drops_inside, drop_tick));
+  if (m.off_surface_force_ticks > 0)
+    m.failures.push_back(
+        fmt::format("force above 0.05 N with the proxy off the surface (|φ| > ½ voxel) on {} ticks, "
+                    "first at tick {} (φ = {:.3f} voxel)",
+                    m.off_surface_force_ticks, off_tick, worst_off_phi));
   if (m.min_passivity_margin_j < -lim.energy_tolerance_j)
     m.failures.push_back(fmt::format("passivity observer: energy fell {:.3g} J below the sampled-spring bound",
                                      -m.min_passivity_margin_j));
@@ -717,6 +787,22 @@ std::expected<Replay, std::string> RunReplay(const Context& cx, const Case& c, c
   return r;
 }
 
+// A case's `output`: palpad's CSV from elsewhere, measured as if replayed (exit code as expected).
+std::expected<Replay, std::string> ReadOutput(const Context& cx, const Case& c, bool fast) {
+  Replay r;
+  r.dir = cx.work / "results" / (fast ? "fast" : "realtime") / c.name;
+  fs::create_directories(r.dir);
+  for (const char* f : {"out.csv", "summary.json", "timing.csv", "recorded.ptb"}) fs::remove(r.dir / f);
+  const fs::path path = cx.suite.hil_dir / c.output;
+  if (!fs::is_regular_file(path)) return std::unexpected(path.string() + ": no such output file");
+  r.csv = Slurp(path);
+  r.exit_code = c.expect_exit;
+  auto ticks = ParseOutput(r.csv, path.string());
+  if (!ticks) return std::unexpected(ticks.error());
+  r.ticks = std::move(*ticks);
+  return r;
+}
+
 // Integer counters from palpad's summary JSON (timing fields are not deterministic and are left
 // out), as the goldens store them: a number's JSON text, or a string's value.
 std::map<std::string, std::string> Counters(const std::string& summary_json) {
@@ -853,6 +939,13 @@ Json MetricsJson(const Case& c, const Replay& r, const Metrics& m, const Context
             {"slope_limit_n", m.slope_limit_n},
             {"releases", m.releases},
             {"max_release_n", m.max_release_n},
+            {"worst_slope_excess_n", m.worst_slope_excess_n},
+            {"deepest_hip_mm", m.deepest_hip_mm},
+            {"holds", m.holds},
+            {"longest_hold_ticks", m.longest_hold_ticks},
+            {"clear_way_force_ticks", m.clear_way_force_ticks},
+            {"drops_inside", m.drops_inside},
+            {"off_surface_force_ticks", m.off_surface_force_ticks},
             {"min_proxy_phi_voxels", m.min_proxy_phi_voxels},
             {"energy_j", m.energy_j},
             {"min_passivity_margin_j", m.min_passivity_margin_j}};
@@ -940,7 +1033,7 @@ int RunCases(Context& cx, const std::string& action) {
       }
       with_swap.palpad.insert(with_swap.palpad.end(), {"--swap-at", fmt::format("{}:{}", c.swap_at, swap->string())});
     }
-    auto replay = RunReplay(cx, with_swap, *field, fast);
+    auto replay = c.output.empty() ? RunReplay(cx, with_swap, *field, fast) : ReadOutput(cx, c, fast);
     if (!replay) {
       fmt::print(stderr, "palpa hil: case {}: {}\n", c.name, replay.error());
       return kExitBadInput;
@@ -1096,9 +1189,11 @@ int RunCases(Context& cx, const std::string& action) {
           "      latency (µs, {} ticks): wake-up p50 {:.1f} p99 {:.1f} p99.9 {:.1f} max {:.1f}; compute p50 {:.1f} "
           "p99 {:.1f} max {:.1f}; total p99 {:.1f} max {:.1f}; {}\n",
           pw.count, pw.p50, pw.p99, pw.p999, pw.max, pc.p50, pc.p99, pc.max, pt.p99, pt.max, recorded_note);
-    if (m.releases > 0)
-      fmt::print("      releases: {} (contact ended with a step above the slope limit; largest {:.3f} N)\n", m.releases,
-                 m.max_release_n);
+    fmt::print(
+        "      deepest HIP {:.2f} mm, worst slope excess {:+.4f} N, releases {} (largest {:.3f} N), holds {} "
+        "(longest {} ticks)\n",
+        m.deepest_hip_mm, m.ticks > 1 ? m.worst_slope_excess_n : 0.0, m.releases, m.max_release_n, m.holds,
+        m.longest_hold_ticks);
     for (const auto& f : m.failures) fmt::print("    invariant: {}\n", f);
     for (const auto& f : known) fmt::print("    known failure (xfail in cases.toml): {}\n", f);
     for (const auto& x : gone)

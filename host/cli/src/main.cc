@@ -57,6 +57,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
   build->add_flag("-q,--quiet", b.quiet, "No report on stdout");
+  build->add_flag("--strict", b.strict,
+                  "Refuse a point file with any zero-length or non-finite normal or exact duplicate (default: "
+                  "drop them and say so)");
 
   std::string info_field;
   bool info_json = false;
@@ -112,7 +115,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 0.03));
   synth->add_option("--depth", t.depth_m, "Push-in depth below the surface, m")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 0.02));
+      ->check(CLI::Range(0.0, 0.05));
   synth->add_option("--length", t.stroke_m, "Stroke length along the surface, m")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 0.2));
@@ -123,6 +126,15 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(10.0, 100000.0));
   synth->add_option("--seed", t.seed, "Chooses the touch direction")->capture_default_str();
+  TraceImportArgs ti;
+  auto* import = trace->add_subcommand("import", "A recorded t_s,x_m,y_m,z_m CSV, scaled into the workspace");
+  import->add_option("input", ti.input, "Recording, CSV with header t_s,x_m,y_m,z_m")->required();
+  import->add_option("-o,--output", ti.output, "Output trace: .ptb binary v2, else text v2")->required();
+  import->add_option("--scale", ti.scale, "Uniform scale about the bounding-box centre")->check(CLI::PositiveNumber);
+  import->add_option("--offset", ti.offset_m, "x,y,z metres for the box centre")->delimiter(',')->expected(3);
+  import->add_option("--from", ti.from_s, "Window start, s")->check(CLI::NonNegativeNumber);
+  import->add_option("--duration", ti.duration_s, "Window length, s (0: to the end)")->check(CLI::NonNegativeNumber);
+  import->add_option("--note", ti.note, "Provenance kept in the trace's comment");
 
   HilArgs hil_args;
   std::string hil_emulator;
@@ -288,6 +300,7 @@ int main(int argc, char** argv) {
   if (*info) return RunInfo(info_field, info_json);
   if (*exp) return RunExport(export_field, export_npy);
   if (*synth) return RunTraceSynth(t);
+  if (*import) return RunTraceImport(ti);
   if (*hil) {
     hil_args.mode = hil_realtime ? "realtime" : "fast";
     std::istringstream words(hil_emulator);

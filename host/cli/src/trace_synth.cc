@@ -13,6 +13,8 @@
 #include <algorithm>
 #include <cmath>
 #include <expected>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -409,9 +411,9 @@ class Synth {
       for (int tries = 0; tries < 100 && !touch; ++tries) {
         touch = RandomTouch();
         if (!touch) break;
-        // Far side: φ back above 0 along −n within 30 mm.
+        // Far side: φ back above 0 along −n within 80 mm (a thin part, or a whole object).
         thickness = 0;
-        for (double s = field_.voxel_m(); s < 0.03; s += 0.1 * field_.voxel_m()) {
+        for (double s = field_.voxel_m(); s < 0.08; s += 0.1 * field_.voxel_m()) {
           if (field_.Phi(touch->surface - s * touch->normal) > 0) {
             thickness = s;
             break;
@@ -425,7 +427,7 @@ class Synth {
         const Vector3d start = touch->surface + kStandoffM * touch->ray;
         if (MinPhiAlong(ExitAlong(start, touch->ray), start) < Clearance()) touch.reset();
       }
-      if (!touch) return SynthError{"no thin part found (the far side must be within 30 mm)"};
+      if (!touch) return SynthError{"no part to pass through found (the far side must be within 80 mm)"};
       const auto [surface, normal, ray] = *touch;
       // Attempts start on the touch ray (free by construction, it came from outside the grid),
       // and travel between attempts leaves the grid along it and comes back along the next.
@@ -633,6 +635,101 @@ int RunTraceSynth(const TraceSynthArgs& a) {
   }
   fmt::print("{}: {} {} samples over {:.3f} s at {} Hz ({} bytes, {})\n", a.output, a.kind, samples.size(),
              samples.back().t_s, a.rate_hz, out.size(), binary ? "binary v2" : "text v2");
+  return kExitOk;
+}
+
+namespace {
+
+// A regular file of at most 64 MB, whole (recordings at 1 kHz are ~40 bytes a sample).
+std::expected<std::string, std::string> ReadSmallTextFile(const std::string& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::is_regular_file(status)) return std::unexpected(path + ": not a regular file");
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec || size > (std::uintmax_t{64} << 20)) return std::unexpected(path + ": larger than 64 MB or unreadable");
+  std::ifstream in(path, std::ios::binary);
+  std::string text(static_cast<std::size_t>(size), '\0');
+  if (!in.read(text.data(), static_cast<std::streamsize>(size))) return std::unexpected(path + ": read failed");
+  return text;
+}
+
+}  // namespace
+
+int RunTraceImport(const TraceImportArgs& a) {
+  const auto fail = [&](const std::string& m) {
+    fmt::print(stderr, "palpa trace import: {}\n", m);
+    return kExitBadInput;
+  };
+  auto text = ReadSmallTextFile(a.input);
+  if (!text) return fail(text.error());
+  // Rows after the header: t_s,x_m,y_m,z_m, finite, time strictly increasing; the window only.
+  std::vector<trace::TraceSample> rows;
+  std::size_t pos = 0, line = 0;
+  while (pos < text->size()) {
+    std::size_t end = text->find('\n', pos);
+    if (end == std::string::npos) end = text->size();
+    const std::string row = text->substr(pos, end - pos);
+    pos = end + 1;
+    if (++line == 1) {
+      if (!row.starts_with("t_s,x_m,y_m,z_m")) return fail(fmt::format("{}:1: header is not t_s,x_m,y_m,z_m", a.input));
+      continue;
+    }
+    if (row.empty() || row == "\r") continue;
+    double v[4];
+    const char* p = row.c_str();
+    for (int i = 0; i < 4; ++i) {
+      char* next = nullptr;
+      v[i] = std::strtod(p, &next);
+      if (next == p || !std::isfinite(v[i]) || (i < 3 && *next != ','))
+        return fail(fmt::format("{}:{}: not a row of four numbers", a.input, line));
+      p = next + 1;
+    }
+    if (!rows.empty() && !(v[0] > rows.back().t_s) && v[0] >= a.from_s)
+      return fail(fmt::format("{}:{}: time {} s does not increase", a.input, line, v[0]));
+    if (v[0] < a.from_s || (a.duration_s > 0 && v[0] > a.from_s + a.duration_s)) continue;
+    rows.push_back({v[0], {v[1], v[2], v[3]}, 0});
+  }
+  if (rows.size() < 2) return fail(fmt::format("{}: fewer than 2 samples in the window", a.input));
+  Vector3d lo = Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& r : rows)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], r.hip_m[static_cast<std::size_t>(k)]);
+      hi[k] = std::max(hi[k], r.hip_m[static_cast<std::size_t>(k)]);
+    }
+  const Vector3d centre = 0.5 * (lo + hi);
+  const Vector3d offset =
+      a.offset_m.size() == 3 ? Vector3d(a.offset_m[0], a.offset_m[1], a.offset_m[2]) : Vector3d::Zero();
+  const double t0 = rows.front().t_s;
+  for (auto& r : rows) {
+    r.t_s -= t0;
+    for (std::size_t k = 0; k < 3; ++k)
+      r.hip_m[k] = a.scale * (r.hip_m[k] - centre[static_cast<Eigen::Index>(k)]) + offset[static_cast<Eigen::Index>(k)];
+  }
+  if (auto ok = trace::CheckSamples(rows); !ok)
+    return fail(fmt::format("{} scaled by {}: {} (choose a smaller --scale)", a.input, a.scale, ok.error().message));
+  const Vector3d ext = a.scale * (hi - lo);
+  const std::string comment = fmt::format(
+      "palpa trace import {} --scale {} --offset {},{},{} --from {} --duration {}\n"
+      "recorded motion, scaled uniformly by {} about its bounding-box centre ({:.4f}, {:.4f}, {:.4f}) m, which is "
+      "put at ({}, {}, {}) m; extent {:.1f} x {:.1f} x {:.1f} mm; time from 0\n{}",
+      a.input.substr(a.input.find_last_of('/') + 1), a.scale, offset[0], offset[1], offset[2], a.from_s, a.duration_s,
+      a.scale, centre[0], centre[1], centre[2], offset[0], offset[1], offset[2], 1e3 * ext[0], 1e3 * ext[1],
+      1e3 * ext[2], a.note);
+  std::string out;
+  const bool binary = a.output.ends_with(".ptb");
+  if (binary) {
+    auto encoded = trace::EncodeBinaryTrace(rows, comment);
+    if (!encoded) return fail(fmt::format("{}: {}", a.output, encoded.error().message));
+    out = std::move(*encoded);
+  } else {
+    out = trace::FormatTrace(rows, comment);
+  }
+  if (auto w = WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size()))); !w) {
+    fmt::print(stderr, "palpa trace import: {}\n", w.error());
+    return kExitIo;
+  }
+  fmt::print("{}: {} samples over {:.3f} s, extent {:.1f} x {:.1f} x {:.1f} mm ({} bytes)\n", a.output, rows.size(),
+             rows.back().t_s, 1e3 * ext[0], 1e3 * ext[1], 1e3 * ext[2], out.size());
   return kExitOk;
 }
 

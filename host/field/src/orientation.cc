@@ -57,7 +57,9 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
         const std::size_t top = std::min(kSupportPoints, n);
         std::partial_sort(along.begin(), along.begin() + static_cast<std::ptrdiff_t>(top), along.end());
         std::size_t inward = 0;
-        for (std::size_t t = 0; t < top; ++t) inward += normals[along[t].second].dot(u) < 0.0 ? 1u : 0u;
+        // Clearly inward only: the rim of an open scan, or an exact normal on a face parallel to u,
+        // is perpendicular to u and says nothing (issue 20: the check misfired on both).
+        for (std::size_t t = 0; t < top; ++t) inward += normals[along[t].second].dot(u) < -kFlatSin ? 1u : 0u;
         ++report.support_directions;
         report.inward_support_directions += 2 * inward > top ? 1 : 0;
       }

@@ -59,9 +59,19 @@ std::expected<PointSet, Error> AtLeastFour(const std::string& name, PointSet poi
   return points;
 }
 
+// AddOrientedPoint, except that a bad normal is kept as (0, 0, 0) (ReadOptions::keep_bad_normals).
+std::optional<std::string> AddPointKeepingBadNormal(PointSet& points, const Eigen::Vector3d& p,
+                                                    const Eigen::Vector3d& n) {
+  if (!p.allFinite()) return "position is not finite";
+  if (n.allFinite() && n.cwiseAbs().maxCoeff() > 0.0) return detail::AddOrientedPoint(points, p, n);
+  points.positions.push_back(p);
+  points.normals.push_back(Eigen::Vector3d::Zero());
+  return std::nullopt;
+}
+
 // A PLY file: the header is looked for in the first kMaxPlyHeaderBytes (so a file without one is
 // refused after reading that much), then the whole file is read within kMaxPlyBytes.
-std::expected<PointSet, Error> ReadPlyFile(const std::string& name) {
+std::expected<PointSet, Error> ReadPlyFile(const std::string& name, const detail::AddPoint& add) {
   std::uint64_t size = 0;
   auto fd = io::OpenRegular(name, "point file", &size);
   if (!fd) return std::unexpected(Error{std::move(fd.error().message)});
@@ -94,21 +104,26 @@ std::expected<PointSet, Error> ReadPlyFile(const std::string& name) {
   ::close(*fd);
   if (failed) return std::unexpected(Error{fmt::format("{}: read error: {}", Quoted(name), std::strerror(read_errno))});
   PointSet points;
-  if (auto error = detail::ReadPly(Quoted(name), text, detail::AddOrientedPoint, points))
-    return std::unexpected(Error{std::move(*error)});
+  if (auto error = detail::ReadPly(Quoted(name), text, add, points)) return std::unexpected(Error{std::move(*error)});
   return AtLeastFour(name, std::move(points));
 }
 
 }  // namespace
 
-std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
+std::string PointPlace(const std::string& file, const PointSet& points, std::size_t index) {
+  if (index < points.lines.size()) return fmt::format("{}:{}", file, points.lines[index]);
+  return fmt::format("{}: vertex {}", file, index);
+}
+
+std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, const ReadOptions& options) {
   const std::string name = path.string();
   const std::string ext = Lower(path.extension().string());
   if (ext != ".xyz" && ext != ".pwn" && ext != ".ply") {
     return std::unexpected(Error{fmt::format("{}: unknown extension '{}' (expected .xyz, .pwn or .ply)", Quoted(name),
                                              io::Escape(path.extension().string()))});
   }
-  if (ext == ".ply") return ReadPlyFile(name);
+  const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
+  if (ext == ".ply") return ReadPlyFile(name, add);
 
   // Streamed line by line: memory is bounded by the points, not by what the file holds.
   auto reader = io::LineReader::Open(name, kMaxLineBytes, "point file");
@@ -157,9 +172,10 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path) {
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
     const Eigen::Vector3d n(values[3], values[4], values[5]);
-    if (auto bad = detail::AddOrientedPoint(points, p, n)) {
+    if (auto bad = add(points, p, n)) {
       return std::unexpected(Error{fmt::format("{}:{}: {}", Quoted(name), line_number, *bad)});
     }
+    if (options.keep_bad_normals) points.lines.push_back(static_cast<std::size_t>(line_number));
   }
   return AtLeastFour(name, std::move(points));
 }

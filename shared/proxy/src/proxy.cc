@@ -55,8 +55,6 @@ std::int64_t Norm2(const Vec& d) { return d[0] * d[0] + d[1] * d[1] + d[2] * d[2
 
 std::int64_t MaxAbs(const Vec& d) { return std::max({std::llabs(d[0]), std::llabs(d[1]), std::llabs(d[2])}); }
 
-std::int64_t Dot(const Vec& d, const Vec& g) { return d[0] * g[0] + d[1] * g[1] + d[2] * g[2]; }
-
 // Divides by a power of two until every |component| ≤ 2^bits: keeps the direction (up to
 // truncation towards zero, which never lengthens it) and bounds the products that follow.
 Vec ShrinkTo(const Vec& d, int bits) {
@@ -215,7 +213,8 @@ struct Tick {
   bool phi_h_known;
   bool converged;
   std::int64_t phi_h;
-  int samples;
+  int samples;      // at or towards the proxy: the budget of max_iterations
+  int hip_samples;  // φ(X_h), once a tick besides (outside the budget)
   int gradient_samples;
   int halvings;        // consecutive rejected steps: the next move is halved this often
   bool leave_blocked;  // the straight way to an outside HIP runs into the object: slide instead
@@ -239,7 +238,8 @@ struct Tick {
         phi_h_known(have_phi_h),
         converged(false),
         phi_h(phi_at_hip),
-        samples(have_phi_h ? 1 : 0),
+        samples(0),
+        hip_samples(have_phi_h ? 1 : 0),
         gradient_samples(0),
         halvings(0),
         leave_blocked(false) {}
@@ -251,7 +251,7 @@ Next SamplePhiAtHip(Tick& t) {
   t.phi_h = t.field.Phi(static_cast<std::int32_t>(t.h[0]), static_cast<std::int32_t>(t.h[1]),
                         static_cast<std::int32_t>(t.h[2]), t.caches.hip_phi_cache);
   t.phi_h_known = true;
-  ++t.samples;
+  ++t.hip_samples;
   return Next::kContinue;
 }
 
@@ -287,16 +287,18 @@ Next SamplePhiAtHip(Tick& t) {
   return Next::kContinue;
 }
 
-// Leaving contact: the HIP is in front of the surface linearised at the proxy and outside the
-// field. March straight towards it in steps that certify by construction: from a with φ(a) known,
-// a step of length L whose end has φ ≥ −δ/2 keeps the whole step above −δ once Λ·L ≤ φ(a) + 3δ/2,
-// so each step is as long as that allows (sphere tracing: the steps grow as the proxy leaves the
-// surface) and only its end is sampled. Jump when the HIP is within reach. An end with φ < −δ/2
-// means the straight way runs into the object (the HIP went through a thin part): the proxy is
-// blocked there and eq. 9's tangential slide takes over (ContactRun), wrapping it round the part
-// while the spring keeps pulling the HIP back; the force never drops to zero with the HIP still
-// on the far side.
+// Leaving contact: the HIP is outside the field. March straight towards it in steps that certify
+// by construction: from a with φ(a) known, a step of length L whose end has φ ≥ −δ keeps the whole
+// step above −3δ/2 (the way's floor) once Λ·L ≤ φ(a) + 2δ, so each step is as long as that allows
+// (sphere tracing: the steps grow as the proxy leaves the surface) and only its end is sampled.
+// Jump when the HIP is within reach. The clear-way test is relative to where the proxy rests:
+// a resting proxy has φ ≥ −δ/2, and the way counts as blocked only where it samples φ < −δ, i.e.
+// at least δ/2 deeper than any resting point (the HIP went through a part, or round the back of
+// one). A blocked proxy is held and eq. 9's tangential slide takes over (ContactRun), wrapping it
+// round the part while the spring keeps pulling the HIP back. Steps ending in [−δ, −δ/2) are
+// taken (the way is clear; the proxy may rest there while it marches, never deeper).
 [[gnu::noinline]] Next LeaveStep(Tick& t) {
+  const std::int64_t way = 3 * t.delta / 2;  // the floor of every march step: φ ≥ −3δ/2 along it
   while (t.samples < t.params.max_iterations) {
     const Vec d = Sub(t.h, t.p);
     const auto len = static_cast<std::int64_t>(ISqrt(Norm2(d)));
@@ -304,10 +306,10 @@ Next SamplePhiAtHip(Tick& t) {
     // Λ along d, rounded up; 0 only for a constant field.
     const std::int64_t rate = std::min<std::int64_t>(t.lb.norm, fixed::FloorDiv(AxisVariation(d, t.lb) + len - 1, len));
     // φ budget after the rounding slack and the truncation of the new position (≤ 1 LSB per axis).
-    const std::int64_t budget = t.at.phi + 3 * t.delta / 2 - kSlack - ((2 * std::int64_t{t.lb.norm}) >> 16) - 1;
+    const std::int64_t budget = t.at.phi + 2 * t.delta - kSlack - ((2 * std::int64_t{t.lb.norm}) >> 16) - 1;
     if (budget <= 0) break;
     const std::int64_t step = rate == 0 ? len : fixed::FloorDiv(budget << 16, rate);
-    if (step >= len && t.phi_h >= -t.delta / 2) {  // the HIP itself is within a certified step
+    if (step >= len && t.phi_h >= 0) {  // the HIP itself is within a certified step
       t.p = t.h;
       t.at.phi = t.phi_h;
       t.grad_valid = false;
@@ -317,7 +319,7 @@ Next SamplePhiAtHip(Tick& t) {
     if (q == t.p) break;
     const std::int64_t phi_q = t.field.Phi(ToGridPos(q), t.caches.proxy_phi_cache);
     ++t.samples;
-    if (phi_q < -t.delta / 2 || !Certified(t.at.phi, phi_q, Sub(q, t.p), t.lb, t.delta)) break;
+    if (phi_q < -t.delta || !Certified(t.at.phi, phi_q, Sub(q, t.p), t.lb, way)) break;
     t.p = q;
     t.at.phi = phi_q;
     t.grad_valid = false;
@@ -355,14 +357,15 @@ enum class Contact { kDone, kLeave, kContinue };
     std::int64_t dx = hx - px, dy = hy - py, dz = hz - pz;
     std::int64_t dot16 = RoundShift(dx * gx + dy * gy + dz * gz, 16);
     const std::int64_t c = at.phi + dot16;  // φ linearised at X_p, evaluated at X_h
-    if (c >= 0 && !t.leave_blocked) {
-      if (!t.phi_h_known) SamplePhiAtHip(t);  // (the settle budget does not gate leaving)
-      if (t.phi_h >= 0) {
-        result = Contact::kLeave;
-        break;
-      }
+    // A HIP outside the field leaves (the march decides whether the way is clear), wherever it is
+    // relative to the linearisation: the force holds only for a HIP inside or a blocked way.
+    if (!t.leave_blocked && t.phi_h >= 0) {
+      result = Contact::kLeave;
+      break;
     }
-    if (t.samples >= prm.settle_samples && !lagging) break;
+    // (A held proxy's march took this tick's first samples; its slide round the part may use the
+    // rest, like a lagging one.)
+    if (t.samples >= prm.settle_samples && !lagging && !t.leave_blocked) break;
     if (t.far) {  // |d_i| ≤ 64 voxels, shrunk along its direction, bounds the products below
       const Vec d = ShrinkTo({dx, dy, dz}, 22);
       dx = d[0], dy = d[1], dz = d[2];
@@ -414,7 +417,9 @@ enum class Contact { kDone, kLeave, kContinue };
     // Lagging: a fast HIP and a target beyond the first piece, or a target more than five pieces
     // away whatever the HIP did (so a proxy never falls further and further behind).
     lagging = dt_variation > first_room && (t.fast || dt_variation > first_room + 4 * piece);
-    const int room = (lagging ? prm.max_iterations : std::min(prm.settle_samples, prm.max_iterations)) - t.samples;
+    const int room =
+        (lagging || t.leave_blocked ? prm.max_iterations : std::min(prm.settle_samples, prm.max_iterations)) -
+        t.samples;
     if (room <= 0) break;
     std::int64_t reached = 0;                // Δt's variation covered by the accepted pieces
     std::int64_t ex = px, ey = py, ez = pz;  // end of the last accepted piece
@@ -442,12 +447,17 @@ enum class Contact { kDone, kLeave, kContinue };
       // Certification of the piece [e, q]: |∇φ·piece| ≤ |∇φ·Δn| + |∇φ·Δt-part| pointwise, so the
       // parts' bounds (Δt's scale linearly along it; truncation only shortens) bound its
       // variation without a new product; the exact bound is the fallback.
-      const std::int64_t need = (at.phi + s.phi + 2 * delta - kSlack) << 16;
+      // Certified to the way's floor −3δ/2 (a proxy may start a move from a march's rest in
+      // [−δ, −δ/2)); an end must rest (φ ≥ −δ/2) and, with the HIP inside, stay in the near band,
+      // so that the force holds without a gap. Held beyond a part (HIP outside), a piece may leave
+      // the band round a convex edge: the proxy is then released into free motion.
+      const std::int64_t way = 3 * delta / 2;
+      const std::int64_t need = (at.phi + s.phi + 2 * way - kSlack) << 16;
       const std::int64_t piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
       const bool in_band = at.phi <= t.band_top && s.phi <= t.band_top;
-      if (!(s.phi >= -delta / 2 && need >= 0 &&
+      if (!(s.phi >= -delta / 2 && (s.phi <= prm.near_q16 || t.leave_blocked) && need >= 0 &&
             ((in_band && piece_variation <= need) ||
-             Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, in_band ? t.band : t.lb, delta)))) {
+             Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, in_band ? t.band : t.lb, way)))) {
         break;
       }
       ex = qx, ey = qy, ez = qz;
@@ -458,7 +468,7 @@ enum class Contact { kDone, kLeave, kContinue };
       } else {
         at.phi = s.phi;
       }
-      if (at.phi > prm.near_q16) {  // off the surface (a convex edge): free motion next
+      if (at.phi > prm.near_q16) {  // off the surface round a part (held only): free motion next
         left = true;
         break;
       }
@@ -486,22 +496,31 @@ enum class Contact { kDone, kLeave, kContinue };
   return result;
 }
 
-// Eq. 10, f = k·h·(X_p − X_h), clamped to max_force with its direction kept.
-[[gnu::noinline]] void Force(const ProxyParams& params, GridPos p, GridPos h, TickResult& r) {
-  const Vec u = Diff(p, h);  // |u_i| < 2^29.6
+// Eq. 10, f = k·h·(X_p − X_h), its magnitude limited to min(max_force, cap) with its direction
+// kept. Every component is rounded towards zero and |u| up (⌈√|u|²⌉), so |f| ≤ k·|u| and
+// |f| ≤ the limit hold exactly in integers: Σ f_i² ≤ limit². Returns an upper bound of |f|.
+// ⌈|u|⌉ (< 2^31).
+std::int64_t CeilLength(const Vec& u) {
+  const std::int64_t n2 = Norm2(u);
+  auto len = static_cast<std::int64_t>(ISqrt(n2));
+  return len * len < n2 ? len + 1 : len;
+}
+
+[[gnu::noinline]] std::int64_t Force(const ProxyParams& params, const Vec& u, std::int64_t len, std::int64_t cap,
+                                     TickResult& r) {
+  // |u_i| < 2^29.6, len = ⌈|u|⌉
   const std::int64_t k = params.k.value.raw();
-  const std::int64_t max_f = params.max_force.value.raw();
-  const auto len = static_cast<std::int64_t>(ISqrt(Norm2(u)));
-  const std::int64_t magnitude = RoundShift(k * len, 16);
-  r.clamped = magnitude > max_f;
+  const std::int64_t limit = std::min<std::int64_t>(params.max_force.value.raw(), cap);
+  r.clamped = k * len > (limit << 16);
   std::int32_t any = 0;
   for (std::size_t a = 0; a < 3; ++a) {
-    const std::int64_t f = r.clamped ? fixed::DivRound(max_f * u[a], len) : RoundShift(k * u[a], 16);
+    const std::int64_t f = r.clamped ? limit * u[a] / len : k * u[a] / 65536;  // towards zero
     r.force[a] = {fixed::Q16::FromRaw(static_cast<std::int32_t>(f))};
     any |= static_cast<std::int32_t>(f);
   }
   r.contact = any != 0;
   r.penetration_q16 = r.contact ? SaturateToInt32(len) : 0;
+  return r.contact ? std::min(limit, (k * len + 65535) >> 16) : 0;
 }
 
 }  // namespace
@@ -538,6 +557,8 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
     state.last_hip = h;
     state.seated = phi_start >= 0;
     state.valid = true;
+    state.pull_q16 = 0;
+    state.hip_phi_bound_q16 = phi_start;
     r.proxy = h;
     r.iterations = 1;
     return r;
@@ -550,6 +571,23 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
              std::int64_t{params.settle_samples} * ((3 * delta / 2) << 16),
          Pos(state.proxy), {state.phi, {state.grad[0], state.grad[1], state.grad[2]}, state.inv_grad2},
          state.grad_valid, phi_h, phi_h_known);
+  // φ(X_h) every tick (outside the settle budget): the force holds only for a HIP inside or a
+  // blocked way, never for one outside with the way clear. In contact, an upper bound does when it
+  // shows the HIP inside: last tick's bound plus Λ·|ΔX_h| (the steady press and slide, no sample).
+  // The band's Λ serves: from an inside point, φ cannot reach 0 without first crossing cells that
+  // are not free space (φ ≤ 0 there), where the band's bound holds.
+  if (!t.phi_h_known && state.phi <= params.near_q16 && state.hip_phi_bound_q16 < 0) {
+    const std::int64_t up = (std::int64_t{state.hip_phi_bound_q16} << 16) +
+                            AxisVariation(Diff(h, state.last_hip), field.lipschitz_band()) + (kSlack << 16);
+    if (up < -(std::int64_t{1} << 16)) {
+      t.phi_h = -((-up) >> 16);  // rounded up: still an upper bound, < 0
+      t.phi_h_known = true;
+    }
+  }
+  if (!t.phi_h_known) SamplePhiAtHip(t);
+  // In free motion that sample is one of the budget (sphere tracing towards X_h needs it anyway);
+  // at the surface it is one more.
+  if (t.at.phi > params.near_q16) t.samples = t.hip_samples;
   // Each pass takes at most one field sample; a pass without one ends the loop or samples in the
   // next, so 2·max_iterations + 2 passes bound it.
   for (int pass = 0; pass < 2 * params.max_iterations + 2 && t.samples < params.max_iterations; ++pass) {
@@ -572,6 +610,9 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
   }
 
   const GridPos p = ToGridPos(t.p);
+  const GridPos last_hip = state.last_hip, last_proxy = state.proxy;
+  const std::int64_t last_pull = state.pull_q16;
+  state.hip_phi_bound_q16 = t.phi_h_known ? SaturateToInt32(t.phi_h) : std::numeric_limits<std::int32_t>::max();
   state.proxy = p;
   state.last_hip = h;
   state.phi = static_cast<std::int32_t>(t.at.phi);
@@ -579,22 +620,41 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
                 static_cast<std::int32_t>(t.at.grad[2])};
   state.inv_grad2 = t.at.inv_grad2;
   state.grad_valid = t.grad_valid;
+  state.pull_q16 = 0;
   r.proxy = p;
   r.iterations = t.samples;
   r.converged = t.converged;
   if (t.p == t.h) return r;
 
   // Eq. 10 only when the proxy is at the surface (within the near band, where eq. 9 holds it) and
-  // the HIP is behind it, or beyond a part it cannot cross; a proxy still catching up in free
-  // space gives no force.
-  bool behind = t.leave_blocked;
-  if (!behind && t.grad_valid) {
-    behind = t.at.phi + RoundShift(Dot(Sub(t.h, t.p), t.at.grad), 16) < 0;
-  } else if (!behind && t.phi_h_known) {
-    behind = t.phi_h < 0;
+  // the HIP is inside the field, or outside beyond a part the way to it runs into (held); never
+  // with the HIP outside and the way clear, nor for a proxy still catching up in free space.
+  const bool inside_hip = t.phi_h_known && t.phi_h < 0;
+  if (t.at.phi > params.near_q16 || !(inside_hip || t.leave_blocked)) return r;
+  // No step: the magnitude rises at most by what the spring's ends moved (k·(|ΔX_h| + |ΔX_p|), the
+  // proxy's part at most a voxel) plus max_force/1024; held with the HIP outside (overpowered,
+  // through a part) it fades by max_force/1024 a tick instead (1 s at 1 kHz to zero).
+  const std::int64_t fade = params.max_force.value.raw() >> 10;
+  const std::int64_t k = params.k.value.raw();
+  const std::int64_t max_f = params.max_force.value.raw();
+  std::int64_t cap = std::max<std::int64_t>(0, last_pull - fade);
+  const Vec u = Diff(p, h);
+  const std::int64_t len = CeilLength(u);
+  if (inside_hip) {
+    cap = max_f;
+    // The spring's length bounds its force (k·⌈|u|⌉ ≥ |f|): within last_pull + fade the limit
+    // cannot bind, and the steady press or slide needs no roots for it.
+    if (k * len > ((last_pull + fade) << 16)) {
+      // How far the spring's ends moved this tick (the proxy's part at most a voxel).
+      const auto hip_step = static_cast<std::int64_t>(ISqrt(Norm2(Diff(h, last_hip))));
+      const std::int64_t proxy_step =
+          std::min<std::int64_t>(std::int64_t{1} << 16, static_cast<std::int64_t>(ISqrt(Norm2(Diff(p, last_proxy)))));
+      cap = std::min(max_f,
+                     last_pull + fade +
+                         ((k * std::min<std::int64_t>(hip_step + proxy_step, std::int64_t{1} << 31) + 65535) >> 16));
+    }
   }
-  if (t.at.phi > params.near_q16 || !behind) return r;
-  Force(params, p, h, r);
+  state.pull_q16 = static_cast<std::int32_t>(Force(params, u, len, cap, r));
   return r;
 }
 
@@ -612,6 +672,7 @@ namespace {
     state.last_hip = h;
     state.phi = phi_h;
     state.grad_valid = false;
+    state.hip_phi_bound_q16 = phi_h;
     TickResult r;
     r.proxy = h;
     r.iterations = 1;
@@ -645,6 +706,13 @@ TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& 
   TickResult r;
   r.proxy = hip;
   return r;
+}
+
+std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip) {
+  TickResult r;
+  const Vec u = Diff(proxy, hip);
+  Force(params, u, CeilLength(u), params.max_force.value.raw(), r);
+  return r.force;
 }
 
 namespace {

@@ -221,9 +221,33 @@ template <typename R, typename Use>
   return WithRowView<R>(i, j, k, moved, use);
 }
 
+// Outside the grid the field is its boundary value extended outward: φ at the nearest grid point
+// (each coordinate clamped to [0, n − 1]), so a face where φ < 0 stays a wall, never free space;
+// the extension is constant across the face, so its gradient has no component along a clamped
+// axis. Clamping is 1-Lipschitz per axis: the Lipschitz bounds hold for the extension too.
+[[gnu::noinline]] std::int32_t TrilinearSampler::PhiOutside(std::int32_t x, std::int32_t y, std::int32_t z) const {
+  const auto clamp = [&](std::int32_t v, std::size_t a) {
+    return static_cast<std::int32_t>(std::clamp<std::int64_t>(v, 0, last_[a]));
+  };
+  return Phi(clamp(x, 0), clamp(y, 1), clamp(z, 2));
+}
+
+[[gnu::noinline]] Sample TrilinearSampler::AtOutside(std::int32_t x, std::int32_t y, std::int32_t z) const {
+  const auto clamp = [&](std::int32_t v, std::size_t a) {
+    return static_cast<std::int32_t>(std::clamp<std::int64_t>(v, 0, last_[a]));
+  };
+  const std::int32_t cx = clamp(x, 0), cy = clamp(y, 1), cz = clamp(z, 2);
+  Sample s = At(cx, cy, cz);
+  if (cx != x) s.grad[0] = 0;
+  if (cy != y) s.grad[1] = 0;
+  if (cz != z) s.grad[2] = 0;
+  s.in_grid = false;
+  return s;
+}
+
 Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z) const {
   Cell c;
-  if (!Locate(x, y, z, c)) return Background();
+  if (!Locate(x, y, z, c)) return AtOutside(x, y, z);
   if (phi_ == nullptr) {
     if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
     return WithRowView<Sample>(
@@ -239,7 +263,7 @@ Sample TrilinearSampler::At(std::int32_t x, std::int32_t y, std::int32_t z, Grad
   if (Holds(cache, x, y, z)) {
     c = {x >> 16, y >> 16, z >> 16, x & 0xFFFF, y & 0xFFFF, z & 0xFFFF};
   } else {
-    if (!Locate(x, y, z, c)) return Background();
+    if (!Locate(x, y, z, c)) return AtOutside(x, y, z);
     if (FaceCell(c.i, c.j, c.k)) return InterpolateSmooth(FetchBricks(c.i, c.j, c.k), c.fx, c.fy, c.fz);
     RowOctants(c.i, c.j, c.k, cache.moved, cache.expanded);
     cache.sampler = id_;
@@ -283,7 +307,7 @@ template <bool kCache>
 [[gnu::noinline]] PALPA_NO_SLP std::int32_t TrilinearSampler::PhiStored(std::int32_t x, std::int32_t y, std::int32_t z,
                                                                         PhiCache* cache) const {
   Cell c;
-  if (!Locate(x, y, z, c)) return background_;
+  if (!Locate(x, y, z, c)) return PhiOutside(x, y, z);
   const std::int32_t i = c.i, j = c.j, k = c.k;
   if constexpr (kCache) {
     cache->sampler = id_;
@@ -324,7 +348,7 @@ template <bool kCache>
 [[gnu::flatten]] std::int32_t TrilinearSampler::Phi(std::int32_t x, std::int32_t y, std::int32_t z) const {
   if (phi_ == nullptr) return PhiStored<false>(x, y, z, nullptr);
   Cell c;
-  if (!Locate(x, y, z, c)) return background_;
+  if (!Locate(x, y, z, c)) return PhiOutside(x, y, z);
   return InterpolatePhi(Fetch(c.i, c.j, c.k), c.fx, c.fy, c.fz);
 }
 

@@ -1,6 +1,6 @@
 // The servo loop's time source, injectable so that pacing, overrun and fault logic can be tested
 // on simulated time (a 1 kHz loop does not keep real time under qemu-user or on a loaded CI box;
-// /work/shared/notes/cross-rt.md §1-2).
+// docs/cross-rt.md §1-2).
 #pragma once
 
 #include <atomic>

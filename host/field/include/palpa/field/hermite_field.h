@@ -24,8 +24,11 @@
 // below band - 1 faces). Inside each brick the candidate samples are culled exactly per brick,
 // 4^3 and 2^3 block (same values as with all 48), so a node costs a handful of distances; a block
 // that the bracket alone, or its centre value as for bricks, puts beyond the band is filled with
-// +-band at once. The other bricks are labelled by the sign of the evaluated nodes facing
-// them (SparseField::LabelUnallocatedBricks), and last SparseField::ProjectLipschitz makes every
+// +-band at once. The other bricks take their side from the generalized winding number of the
+// samples (winding.h, issue 20): uniform where w is on one side of 1/2 at all 8 corners, else
+// phi = (1/2 - w) / |grad w| per node (the smooth closure of a hole or an unscanned side);
+// evaluated nodes clamped to the band edge take w's side where all 8 corners are sure of it
+// (< 0.3 or > 0.7), and no node on a grid face stays inside. Last SparseField::ProjectLipschitz makes every
 // axis neighbour difference <= 1 voxel, as the proxy's sphere tracing needs: the per-node formula
 // alone breaks that by up to ~2.5 voxels where patches meet or the bracket clamps.
 // Deterministic for any thread count (every node is computed independently, ties broken by
@@ -46,14 +49,25 @@ namespace palpa::field {
 struct HermiteOptions {
   // Step 3 above. Off only to measure what it prevents (tests, docs/field-methods.md).
   bool leak_guard = true;
+  // Inside/outside of the bricks left unevaluated from the samples' winding number (issue 20;
+  // winding.h). false: the former majority vote (SparseField::LabelUnallocatedBricks), kept to
+  // measure the difference.
+  bool winding_labels = true;
 };
 
 struct HermiteStats {
   std::size_t inner_balls_shrunk = 0;  // by the leak guard
   std::size_t outer_balls_shrunk = 0;
-  std::size_t bricks_evaluated = 0;      // including bricks_added
-  std::size_t bricks_added = 0;          // evaluated because a neighbour's face was below band - 1
-  std::size_t label_minority_votes = 0;  // see SparseField::LabelUnallocatedBricks (0 expected)
+  std::size_t bricks_evaluated = 0;       // including bricks_added
+  std::size_t bricks_added = 0;           // evaluated because a neighbour's face was below band - 1
+  std::size_t label_minority_votes = 0;   // winding_labels = false only: LabelUnallocatedBricks' minority
+  std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
+  std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
+  std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
+  // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
+  // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
+  // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.
+  double closed_area_m2 = 0.0;
   SparseField::LipschitzStats lipschitz;
   Packing inner;                  // guarded, metres
   Packing outer;                  // guarded, metres (balls outside the object)

@@ -15,7 +15,9 @@ namespace palpa::field {
 struct OrientationReport {
   // Support test. For each of the 26 directions u = (i, j, k)/|(i, j, k)|, i, j, k in {-1, 0, 1},
   // the 8 points farthest along u lie on the convex hull, where an outward normal has n.u > 0.
-  // A direction counts as inward when most of those 8 normals have n.u < 0.
+  // A direction counts as inward when most of those 8 normals point clearly inward,
+  // n.u < -sin(10 deg) (a normal perpendicular to u, as on the rim of an open scan or on a
+  // mesh face parallel to u, is no evidence either way).
   int support_directions = 0;
   int inward_support_directions = 0;
   // Flat-pair test. A pair (i, j), j among the 8 nearest neighbours of i, is flat when the chord

@@ -3,6 +3,7 @@
 
 #include <expected>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -16,6 +17,16 @@ namespace palpa::field {
 struct PointSet {
   std::vector<Eigen::Vector3d> positions;
   std::vector<Eigen::Vector3d> normals;
+  /// With ReadOptions::keep_bad_normals only: the file line of each point (.xyz, .pwn; empty for
+  /// PLY, whose points are named by vertex number), for messages about single points (PointPlace).
+  std::vector<std::size_t> lines;
+};
+
+struct ReadOptions {
+  /// Keep a point whose normal is zero-length or not finite, with the normal (0, 0, 0), instead
+  /// of refusing the file: the caller drops it and says so (palpa build, issue 20: a real scan
+  /// with 2 such normals of 4,387 must not be refused whole). Non-finite positions stay errors.
+  bool keep_bad_normals = false;
 };
 
 // Reads oriented points, by extension (case-insensitive):
@@ -34,6 +45,11 @@ struct PointSet {
 //   unterminated header (its line), no vertex element or a missing x … nz property, a body that
 //   ends early ("scan.ply: byte 1234: the file ends inside vertex 77 of 100 'nz' (2 of 4 bytes
 //   there)"), and a bad point, named by its vertex number.
-std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path);
+// With options.keep_bad_normals, a zero or non-finite normal is kept as (0, 0, 0) (see ReadOptions).
+std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, const ReadOptions& options = {});
+
+// Where point `index` of `points` (read from `file`) is, for messages: "scan.xyz:17" (its line,
+// when points.lines has it) or "scan.ply: vertex 16" (0-based, as the PLY reader's errors).
+std::string PointPlace(const std::string& file, const PointSet& points, std::size_t index);
 
 }  // namespace palpa::field

@@ -13,12 +13,14 @@
 #include <array>
 #include <cstddef>
 #include <expected>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "palpa/blob/blob.h"
+#include "palpa/mesh/mesh_distance.h"
 #include "palpa/mesh/triangle_mesh.h"
 
 namespace palpa::mesh {
@@ -49,6 +51,10 @@ struct TrueDistanceGrid {
   /// Exact (to float rounding, ~1e-7 voxel) where |value| ≤ exact_within_voxels; farther nodes
   /// hold their exact value or ±infinity, and their SIGN is always exact.
   std::vector<float> voxels;
+  /// Mesh truths: the mesh in node index coordinates (1 unit = 1 voxel), for exact distances
+  /// beyond exact_within_voxels (Evaluate measures how deep the far wrong-sign nodes lie).
+  /// Null for a sphere (its `voxels` are exact everywhere).
+  std::shared_ptr<const ExactMeshDistance> mesh_in_voxels;
 };
 
 /// Computes the truth on `field`'s grid, through its fit transform.
@@ -66,6 +72,16 @@ std::expected<TrueDistanceGrid, Error> TrueDistances(const blob::FieldView& fiel
 struct EvalOptions {
   double band_voxels = 3;          ///< score nodes with |true| ≤ this (issue 5: 3 voxels)
   double gross_beyond_voxels = 1;  ///< a wrong sign is "gross" when |true| > this
+  double far_beyond_voxels = 3;    ///< a wrong sign is "far" when |true| > this (issue 20)
+};
+
+/// Far wrong-sign nodes on one side of the surface: phantom solid (φ ≤ 0 where the truth is
+/// outside) or holes (φ > 0 where it is inside), more than far_beyond_voxels from the surface.
+/// A hand feels a phantom as a wall in free air and a hole as a fall-through.
+struct FarWrong {
+  std::size_t nodes = 0;                  ///< how many
+  double deepest_voxels = 0;              ///< the largest |true| among them (exact), voxels; 0 if none
+  Eigen::Vector3d deepest_at_m{0, 0, 0};  ///< device position of that node, m
 };
 
 /// The score, in voxels (1 voxel = field.voxel_m metres). Error e = φ − true at a node.
@@ -82,6 +98,10 @@ struct EvalResult {
   double wrong_sign_in_band_percent = 0;    ///< 100·wrong_sign_in_band / band_nodes
   std::size_t gross_wrong_sign = 0;         ///< nodes with |true| > gross_beyond_voxels and the wrong sign
   double gross_wrong_sign_percent = 0;      ///< 100·gross_wrong_sign / nodes (ALL nodes)
+  FarWrong phantom_solid;                   ///< φ ≤ 0, true > far_beyond_voxels
+  FarWrong holes;                           ///< φ > 0, true < −far_beyond_voxels
+  /// phantom_solid.nodes + holes.nodes: the headline a band score must never hide.
+  std::size_t far_wrong() const { return phantom_solid.nodes + holes.nodes; }
 };
 
 /// Voxels from the surface within which `field`'s stored φ is exact: the smaller of its inside

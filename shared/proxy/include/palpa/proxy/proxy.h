@@ -17,6 +17,7 @@
 #include <array>
 #include <cstdint>
 #include <expected>
+#include <limits>
 
 #include "palpa/blob/blob.h"
 #include "palpa/fixed/units.h"
@@ -93,7 +94,14 @@ struct ProxyState {
   bool grad_valid = false;
   GridPos last_hip;     ///< the HIP of the last tick (its speed decides the contact sample budget)
   bool seated = false;  ///< the HIP has been outside the object since the (re)start
-  bool valid = false;   ///< false: next tick starts the proxy at the HIP (start-up, reset)
+  /// An upper bound of |f| last tick, Q16.16 N (0 without contact): the next tick's force may rise
+  /// above it only by k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024, and falls by
+  /// max_force/1024 a tick while the proxy is held with the HIP outside (overpower fade).
+  std::int32_t pull_q16 = 0;
+  /// An upper bound of φ(last_hip), Q16.16 (INT32_MAX: none). While it shows the HIP inside by
+  /// more than it can have moved (Λ·|ΔX_h|), a contact tick need not sample φ(X_h).
+  std::int32_t hip_phi_bound_q16 = std::numeric_limits<std::int32_t>::max();
+  bool valid = false;  ///< false: next tick starts the proxy at the HIP (start-up, reset)
   /// Blob v2: the cells last sampled at the proxy and at the HIP (sampler::PhiCache), which a tick
   /// mostly samples again. They change how fast a sample is read, never its value, and record
   /// their sampler, so they need no reset (not even after a field swap).
@@ -110,17 +118,18 @@ struct TickResult {
   bool contact = false;                   ///< a non-zero force: the surface holds the proxy from the HIP
   bool clamped = false;                   ///< |f| hit max_force
   bool converged = false;                 ///< eq. 9 reached its fixed point (update ≤ tolerance)
-  int iterations = 0;                     ///< field samples taken, ≤ max_iterations
+  int iterations = 0;                     ///< field samples at or towards the proxy, ≤ max_iterations (φ(X_h) apart)
 };
 
 /// One servo tick of the proxy (paper eq. 9, 10). RT-safe, bounded: at most max_iterations field
 /// samples and a fixed amount of arithmetic per sample.
 ///
 /// Invariant (the no-tunnelling guarantee): every point of the proxy's path, over all ticks, has
-/// φ > −δ, and the proxy rests only where φ ≥ −δ/2. Each move is a straight segment [a, b]
-/// accepted only if φ(a) + φ(b) + 2δ ≥ Λ·|b − a|, where Λ bounds |∇φ·(b−a)/|b−a|| over the whole
-/// grid (min of the field's Lipschitz norm and Σ|d_i|·max|∂_iφ|, see sampler::LipschitzBound):
-/// then φ ≥ (φ(a) + φ(b) − Λ|b−a|)/2 ≥ −δ all along it. A part whose interior reaches φ ≤ −δ
+/// φ > −3δ/2, and the proxy rests only where φ ≥ −δ (a contact move's end ≥ −δ/2). Each move is a
+/// straight segment [a, b] accepted only if φ(a) + φ(b) + 2δ_w ≥ Λ·|b − a| (δ_w = δ in free
+/// motion, 3δ/2 in contact and leaving), where Λ bounds |∇φ·(b−a)/|b−a|| over the whole grid (min
+/// of the field's Lipschitz norm and Σ|d_i|·max|∂_iφ|, see sampler::LipschitzBound): then
+/// φ ≥ (φ(a) + φ(b) − Λ|b−a|)/2 ≥ −δ_w all along it. A part whose interior reaches φ ≤ −3δ/2
 /// across its whole cross-section (a 2-voxel plate reaches −1/2) cannot be crossed.
 ///
 /// Free motion (φ(X_p) > 1/2 voxel): move to X_h without a sample if it lies in the ball where
@@ -135,16 +144,27 @@ struct TickResult {
 /// tangential one as φ(X_p) + 3δ/2 allows, each further piece 3δ/2/Λ more; every piece end is
 /// sampled and every piece certified, a failing piece ends the move (the next is halved). Caps:
 /// max_iterations samples (hard); the tick settles after settle_samples unless the proxy lags a
-/// fast HIP; gradient_samples of them read ∇φ. Convergence test: a move (or computed update) of
-/// |Δ|₁ ≤ tolerance ends the iteration. If the HIP is outside both the linearisation and the
-/// field, the proxy moves towards it instead (leaving contact).
+/// fast HIP; gradient_samples of them read ∇φ. Besides them, φ(X_h) once a tick (not while an
+/// upper bound shows the HIP inside). Convergence test: a move (or computed update) of
+/// |Δ|₁ ≤ tolerance ends the iteration. If the HIP is outside the field, the proxy marches towards
+/// it instead (leaving contact); the way is blocked only where a march end has φ < −δ (δ/2 deeper
+/// than any contact rest), and then the proxy is held and slides round the part.
 /// Friction (μs > 0, CHAI3D-style cone): the proxy sticks while its tangential offset from the
 /// HIP is ≤ μs × depth, and otherwise slides to the edge of the μd cone.
 /// Force (eq. 10): f = k·h·(X_p − X_h) when the proxy is at the surface (φ ≤ 1/2 voxel) and the
-/// HIP is behind it; zero otherwise (free space, or a proxy still catching up). Magnitude clamped
-/// to max_force with its direction kept. A proxy started inside the object follows the HIP with
-/// zero force until the HIP has been outside once.
+/// HIP is inside (φ(X_h) < 0) or the way to it is blocked; zero otherwise (free space, a clear
+/// way, or a proxy still catching up). Magnitude limited to max_force (components rounded towards
+/// zero: Σf² ≤ max² exactly), to last tick's + k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024
+/// (no step), and, held with the HIP outside, to last tick's − max_force/1024 (the overpower
+/// fade); direction kept. With the HIP inside, the proxy never leaves the near band (no drop).
+/// docs/realtime-core.md § Hold, release and overpower policy. A proxy started inside the object
+/// follows the HIP with zero force until the HIP has been outside once.
 TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+
+/// Eq. 10 alone: f = k·h·(proxy − hip), its magnitude clamped to max_force with its direction kept.
+/// Components (Q16.16 N) are rounded towards zero and |u| up, so Σ f_i² ≤ max_force² holds exactly
+/// in raw units (no overshoot by a bit). RT-safe.
+std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip);
 
 /// Passivity observer (Hannaford & Ryu 2002) for the sampled spring of eq. 10. Call Update once
 /// per tick with the tick's HIP and result. RT-safe, integer only.

@@ -37,7 +37,7 @@ struct GridPos {
 struct Sample {
   std::int32_t phi = 0;
   std::array<std::int32_t, 3> grad{};
-  bool in_grid = false;  ///< false: outside the grid, φ = background, gradient 0
+  bool in_grid = false;  ///< false: outside the grid, the boundary value extended outward
 };
 
 /// Corner values v[dx][dy][dz] of one cell, Q16.16 voxels; v[4·dx + 2·dy + dz].
@@ -294,9 +294,11 @@ struct GradientCache {
   }
 };
 
-/// Samples a verified FieldView. Positions outside [0, n−1] on any axis answer the background
-/// (+band voxels, the value of free space) with a zero gradient; nothing outside the payload is
-/// ever read.
+/// Samples a verified FieldView. Positions outside [0, n−1] on any axis answer the boundary value
+/// extended outward: φ at the nearest grid point (coordinates clamped), its gradient with the
+/// clamped axes' components zeroed, `in_grid` false. A face where φ < 0 (an open scan, a part
+/// reaching the grid's edge) is then a wall, not free space. Nothing outside the payload is ever
+/// read.
 class TrilinearSampler {
  public:
   /// Non-RT: scans every cell once (through Fetch) for the Lipschitz bound, O(nodes).
@@ -595,6 +597,10 @@ class TrilinearSampler {
   std::ptrdiff_t Offset(std::int32_t i, std::int32_t j, std::int32_t k) const {
     return static_cast<std::ptrdiff_t>(i) * stride_i_ + static_cast<std::ptrdiff_t>(j) * dims_[2] + k;
   }
+
+  // Outside the grid: the boundary value extended outward (see the class comment).
+  std::int32_t PhiOutside(std::int32_t x, std::int32_t y, std::int32_t z) const;
+  Sample AtOutside(std::int32_t x, std::int32_t y, std::int32_t z) const;
 
   Sample Background() const {
     Sample s;

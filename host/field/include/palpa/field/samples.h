@@ -1,0 +1,76 @@
+// Degenerate samples of a real point set (issue 20): a zero-length or non-finite normal (read with
+// ReadOptions::keep_bad_normals, which stores it as (0, 0, 0)) and exact duplicates carry no
+// orientation or no new information, and a duplicate gives the neighbour searches a zero spacing.
+// They are dropped before the build, counted, and the first of each kind is named.
+#pragma once
+
+#include <cstddef>
+#include <expected>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "palpa/field/error.h"
+#include "palpa/field/point_io.h"
+
+namespace palpa::field {
+
+struct DroppedSamples {
+  std::size_t bad_normals = 0;                  ///< normal (0, 0, 0): zero-length or non-finite in the file
+  std::size_t duplicates = 0;                   ///< same position as an earlier point (bit for bit)
+  std::optional<std::size_t> first_bad_normal;  ///< index in the points as read
+  std::optional<std::size_t> first_duplicate;   ///< index in the points as read
+  std::optional<std::size_t> duplicate_of;      ///< the earlier point first_duplicate repeats
+  std::string first_bad_normal_place;           ///< PointPlace of first_bad_normal ("" if none)
+  std::string first_duplicate_place;            ///< PointPlace of first_duplicate ("" if none)
+  std::string duplicate_of_place;               ///< PointPlace of duplicate_of ("" if none)
+  std::size_t kept = 0;                         ///< points left
+
+  std::size_t Total() const { return bad_normals + duplicates; }
+  /// "2 samples with a zero-length or non-finite normal (first: scan.xyz:17) and 1 exact duplicate
+  /// (first: scan.xyz:40, the position of scan.xyz:12)"; empty when nothing was dropped.
+  std::string Describe() const;
+};
+
+/// Removes from `points` every point whose normal is (0, 0, 0) and every point whose position
+/// equals an earlier point's exactly (its normal is dropped with it), keeping the order of the
+/// rest; `points.lines` follows. `file` names the points' file in the places (PointPlace).
+/// O(n log n). Positions must be finite (ReadPoints ensures it).
+DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file);
+
+/// Samples their neighbours do not support (issue 20): a stray point off the surface, or an
+/// outlier in free space. Each one's inner balls and patch would otherwise make solid where
+/// there is none (a phantom wall), and one far point would collapse `--fit`.
+struct StraySamples {
+  std::vector<std::size_t> indices;     ///< ascending, into the positions given
+  std::optional<std::size_t> farthest;  ///< the one farthest off its neighbours' surface
+  double farthest_spacings = 0;         ///< how far (offset or nearest gap), in local spacings
+  double spacing = 0;                   ///< median distance to the 8th neighbour, all samples
+};
+
+/// Finds the stray samples, scale-free (model units are fine: nothing depends on the units).
+/// For each sample P (unit normal n): its 16 nearest others, their least-squares plane (centroid
+/// c, normal v: the smallest principal axis), P's offset d = |v . (P - c)|, the neighbours' own
+/// RMS offset r, and the local spacing s: the median over the neighbours of their distance to
+/// their 8th nearest sample, clamped to [1, 2] x the median of that over all samples (a dense
+/// ring of a regular lattice must not make s small, nor a crowd of outliers large).
+/// P is stray when
+///   d > 4 r + s / 2  (off the local surface by more than 4x its noise and half a spacing), or
+///   its nearest other sample is more than 1.5 s away (isolated: ~4 typical nearest gaps; an
+///   outlier inside a tube lies on its neighbours' mean plane but far from all of them), or
+///   its 16th nearest is more than 3 s away (~1.4 s on a surface, ~2 s on an open rim: a pair
+///   of outliers is not isolated, but its 16 neighbours are spread over a large region), or
+///   fewer than 4 of the 16 neighbours' normals have a positive dot product with n (a random or
+///   flipped normal; on a sharp edge or a thin wall at least the samples of its own face agree).
+/// Noise, curvature, sharp edges and thin walls raise r with d (noise of 1 voxel per axis keeps
+/// d under ~3 r); open rims lie on their plane; a sparse region has a large s. Deterministic,
+/// parallel; O(n log n). Needs at least 17 samples (fewer: none is stray).
+StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
+                              const std::vector<Eigen::Vector3d>& normals);
+
+/// Removes `indices` (ascending) from points (positions, normals, and lines when present).
+void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices);
+
+}  // namespace palpa::field

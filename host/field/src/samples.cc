@@ -1,0 +1,191 @@
+#include "palpa/field/samples.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <vector>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <Eigen/Eigenvalues>
+
+#include "point_cloud.h"
+
+namespace palpa::field {
+
+std::string DroppedSamples::Describe() const {
+  std::string out;
+  if (bad_normals > 0) {
+    out = fmt::format("{} sample{} with a zero-length or non-finite normal (first: {})", bad_normals,
+                      bad_normals == 1 ? "" : "s", first_bad_normal_place);
+  }
+  if (duplicates > 0) {
+    if (!out.empty()) out += " and ";
+    out += fmt::format("{} exact duplicate{} (first: {}, the position of {})", duplicates, duplicates == 1 ? "" : "s",
+                       first_duplicate_place, duplicate_of_place);
+  }
+  return out;
+}
+
+DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file) {
+  const std::size_t n = points.positions.size();
+  DroppedSamples d;
+  std::vector<std::uint8_t> drop(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (points.normals[i] == Eigen::Vector3d::Zero()) {
+      drop[i] = 1;
+      ++d.bad_normals;
+      if (!d.first_bad_normal) d.first_bad_normal = i;
+    }
+  }
+  // Exact duplicates: sort indices by position (ties by index), so each run of equal positions
+  // starts with its earliest point; every later one in the run is dropped.
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  const auto& p = points.positions;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    for (Eigen::Index ax = 0; ax < 3; ++ax)
+      if (p[a][ax] != p[b][ax]) return p[a][ax] < p[b][ax];
+    return a < b;
+  });
+  std::size_t run_first = n;  // first point of the current run with a usable normal
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t i = order[r];
+    if (r == 0 || p[i] != p[order[r - 1]]) run_first = n;
+    if (drop[i]) continue;  // already dropped for its normal
+    if (run_first == n) {
+      run_first = i;
+      continue;
+    }
+    drop[i] = 1;
+    ++d.duplicates;
+    if (!d.first_duplicate || i < *d.first_duplicate) {
+      d.first_duplicate = i;
+      d.duplicate_of = run_first;
+    }
+  }
+  if (d.first_bad_normal) d.first_bad_normal_place = PointPlace(file, points, *d.first_bad_normal);
+  if (d.first_duplicate) {
+    d.first_duplicate_place = PointPlace(file, points, *d.first_duplicate);
+    d.duplicate_of_place = PointPlace(file, points, *d.duplicate_of);
+  }
+  std::size_t w = 0;
+  const bool lines = points.lines.size() == n;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (drop[i]) continue;
+    points.positions[w] = points.positions[i];
+    points.normals[w] = points.normals[i];
+    if (lines) points.lines[w] = points.lines[i];
+    ++w;
+  }
+  points.positions.resize(w);
+  points.normals.resize(w);
+  if (lines) points.lines.resize(w);
+  d.kept = w;
+  return d;
+}
+
+namespace {
+constexpr std::size_t kPlaneNeighbours = 16;
+constexpr std::size_t kSpacingNeighbour = 8;
+constexpr double kNoiseFactor = 4.0;
+constexpr double kOffsetSpacings = 0.5;
+constexpr double kIsolatedSpacings = 1.5;
+constexpr std::size_t kMinAgreeing = 4;   // of kPlaneNeighbours
+constexpr double kSparseSpacings = 3.0;   // 16th neighbour (~1.4 s on a surface, ~2 s on a rim)
+constexpr double kMaxLocalSpacing = 2.0;  // x the global: outliers among outliers are not a sparse region
+}  // namespace
+
+StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
+                              const std::vector<Eigen::Vector3d>& normals) {
+  StraySamples out;
+  const std::size_t n = positions.size();
+  if (n < kPlaneNeighbours + 1) return out;
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  // Neighbours of every sample, without itself (an exact duplicate may come first instead: same
+  // position, so it makes no difference to the plane).
+  std::vector<std::size_t> nb(n * kPlaneNeighbours);
+  std::vector<double> spacing(n), nearest(n), farthest(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+    std::array<std::size_t, kPlaneNeighbours + 1> idx{};
+    std::array<double, kPlaneNeighbours + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      tree.knnSearch(positions[i].data(), kPlaneNeighbours + 1, idx.data(), d2.data());
+      std::size_t m = 0;
+      for (std::size_t t = 0; t <= kPlaneNeighbours && m < kPlaneNeighbours; ++t)
+        if (idx[t] != i) nb[i * kPlaneNeighbours + m++] = idx[t];
+      spacing[i] = std::sqrt(d2[kSpacingNeighbour]);
+      nearest[i] = std::sqrt(d2[1]);
+      farthest[i] = std::sqrt(d2[kPlaneNeighbours]);
+    }
+  });
+  std::vector<double> sorted = spacing;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n / 2), sorted.end());
+  const double s = sorted[n / 2];
+  out.spacing = s;
+  if (!(s > 0.0)) return out;
+  std::vector<double> excess(n, -1.0);  // offset in spacings when stray, else -1
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) c += positions[nb[i * kPlaneNeighbours + m]];
+      c /= static_cast<double>(kPlaneNeighbours);
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) {
+        const Eigen::Vector3d d = positions[nb[i * kPlaneNeighbours + m]] - c;
+        cov += d * d.transpose();
+      }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+      const Eigen::Vector3d v = eig.eigenvectors().col(0);  // smallest eigenvalue first
+      const double rms = std::sqrt(std::max(eig.eigenvalues()[0], 0.0) / static_cast<double>(kPlaneNeighbours));
+      const double offset = std::abs(v.dot(positions[i] - c));
+      // The spacing where P is: the median of its neighbours' own (a sparse region of a real scan
+      // is not an outlier; a sample far from a normally dense surface is).
+      std::array<double, kPlaneNeighbours> around{};
+      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) around[m] = spacing[nb[i * kPlaneNeighbours + m]];
+      std::nth_element(around.begin(), around.begin() + kPlaneNeighbours / 2, around.end());
+      const double local = std::clamp(around[kPlaneNeighbours / 2], s, kMaxLocalSpacing * s);
+      std::size_t agree = 0;
+      for (std::size_t m = 0; m < kPlaneNeighbours; ++m)
+        if (normals[nb[i * kPlaneNeighbours + m]].dot(normals[i]) > 0.0) ++agree;
+      if (offset > kNoiseFactor * rms + kOffsetSpacings * local || nearest[i] > kIsolatedSpacings * local ||
+          farthest[i] > kSparseSpacings * local || agree < kMinAgreeing)
+        excess[i] = std::max(offset, nearest[i]) / local;
+    }
+  });
+  for (std::size_t i = 0; i < n; ++i) {
+    if (excess[i] < 0.0) continue;
+    out.indices.push_back(i);
+    if (!out.farthest || excess[i] > out.farthest_spacings) {
+      out.farthest = i;
+      out.farthest_spacings = excess[i];
+    }
+  }
+  return out;
+}
+
+void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices) {
+  const std::size_t n = points.positions.size();
+  const bool lines = points.lines.size() == n;
+  std::size_t w = 0;
+  std::size_t next = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (next < indices.size() && indices[next] == i) {
+      ++next;
+      continue;
+    }
+    points.positions[w] = points.positions[i];
+    points.normals[w] = points.normals[i];
+    if (lines) points.lines[w] = points.lines[i];
+    ++w;
+  }
+  points.positions.resize(w);
+  points.normals.resize(w);
+  if (lines) points.lines.resize(w);
+}
+
+}  // namespace palpa::field
