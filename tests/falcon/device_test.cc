@@ -8,6 +8,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "firmware_image.h"
 #include "palpa/device_falcon/falcon_device.h"
@@ -240,6 +241,56 @@ TEST(FalconDevice, FrozenEncodersAreReportedAtHoming) {
   EXPECT_EQ(rig.falcon->torque_before_homed(), 0u);
   EXPECT_TRUE(rig.falcon->torque_is_zero());
   EXPECT_EQ(rig.falcon->last_command().control, falcon::kControlHoming | kLedFault);
+}
+
+// Issue 18: encoders that freeze under torque end the run, and the torque held then fades to zero
+// over stale_ramp_ns (50 ms) instead of dropping at once: each command after the 500 ms window is
+// no larger than the one before, per axis, the last one is within a tick's step of zero, and the fade takes 50 ± 2
+// ticks.
+TEST(FalconDevice, FrozenEncodersInContactFadeTheHeldTorqueToZeroThenFault) {
+  std::uint64_t homing = 0;  // firmware exchanges before forces come on (frozen@N counts these)
+  {
+    Rig probe;
+    probe.BringUp();
+    homing = probe.falcon->commands();
+  }
+  Rig rig({{FaultKind::kFrozen, homing + 300}});
+  rig.BringUp();
+  const std::array<double, 3> f = {0.5, -1.0, -2.0};
+  device::HipReading r;
+  std::vector<std::array<std::int16_t, 3>> sent;
+  device::IoStatus st = device::IoStatus::kOk;
+  for (int i = 0; i < 2000 && (st = rig.device->Read(r)) == device::IoStatus::kOk; ++i) {
+    ASSERT_EQ(rig.device->Write(f), device::IoStatus::kOk);
+    sent.push_back(rig.falcon->last_command().counts);
+  }
+  ASSERT_EQ(st, device::IoStatus::kError);
+  EXPECT_EQ(rig.device->fault().code, FalconFault::kEncodersStale);
+  ASSERT_GT(sent.size(), 400u);
+  // The steady command (frozen pose, constant force) and the first tick that differs from it.
+  const std::array<std::int16_t, 3> held = sent[sent.size() / 2];
+  ASSERT_NE(held, (std::array<std::int16_t, 3>{}));
+  std::size_t first = sent.size();
+  for (std::size_t i = 300; i < sent.size(); ++i)
+    if (sent[i] != held) {
+      first = i;
+      break;
+    }
+  ASSERT_LT(first, sent.size()) << "the held torque never faded";
+  const std::size_t fade = sent.size() - first;
+  EXPECT_GE(fade, 48u);
+  EXPECT_LE(fade, 52u);
+  for (std::size_t i = first; i < sent.size(); ++i)
+    for (std::size_t a = 0; a < 3; ++a) {
+      EXPECT_LE(std::abs(sent[i][a]), std::abs(sent[i - 1][a])) << "tick " << i << " axis " << a;
+      // no step larger than the held command over the fade's ticks, plus one count of truncation
+      EXPECT_LE(std::abs(sent[i][a] - sent[i - 1][a]), std::abs(held[a]) / 48 + 1) << "tick " << i << " axis " << a;
+    }
+  for (std::size_t a = 0; a < 3; ++a) EXPECT_LE(std::abs(sent.back()[a]), std::abs(held[a]) / 48 + 1) << a;
+  // The loop answers the fault with a zero force, which becomes the zero-torque packet.
+  EXPECT_EQ(rig.device->Write({0.0, 0.0, 0.0}), device::IoStatus::kOk);
+  EXPECT_TRUE(rig.falcon->torque_is_zero());
+  EXPECT_TRUE(Has(rig.device->FaultMessage(), "faded to zero over 50.000 ms")) << rig.device->FaultMessage();
 }
 
 TEST(FalconDevice, HomingTimeoutWhenTheFlagsNeverComeButEncodersMove) {

@@ -8,10 +8,15 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -139,6 +144,10 @@ class Palpad {
                                      "300",
                                      "--overrun-limit",
                                      "0"};
+    if (std::find(extra.begin(), extra.end(), "--net-timeout-ms") != extra.end()) {  // the test's own deadline
+      const auto own = std::find(args.begin(), args.end(), "--net-timeout-ms");
+      args.erase(own, own + 2);
+    }
     for (auto& e : extra) args.push_back(e);
     std::vector<char*> argv;
     for (auto& s : args) argv.push_back(s.data());
@@ -565,6 +574,125 @@ TEST(UploadProcess, ThousandSwapsWhileInContactNeverStepTheForce) {
   EXPECT_GT(contact_share, 0.5) << "the trace must be in contact most of the time";
   EXPECT_GT(loaded_swaps, 100u) << "many swaps must happen under load, or the bound proves nothing";
   EXPECT_LE(max_step, bound);
+}
+
+// Issue 18, finding 9: 200 unauthenticated clients that send 1 byte a second used to hold the
+// listener one at a time for their whole header deadline, locking out every status and upload.
+// Now each connection has its own worker and deadline: a status is answered while all 200 are
+// still connected. The latency is printed (not asserted tightly: the machine is noisy); the
+// bound, 4 s, is below the 5 s header deadline that served the first slow client before.
+TEST(UploadProcess, StatusIsAnsweredWhileTwoHundredSlowClientsAreConnected) {
+  const Inputs& in = Shared();
+  Palpad p("slow", {"--net-timeout-ms", "5000"});
+  ASSERT_NE(p.port(), 0) << p.log();
+  constexpr int kSlow = 200;
+  std::vector<Socket> slow;
+  for (int i = 0; i < kSlow; ++i) {
+    auto s = ConnectTcp("127.0.0.1", p.port(), NowNs() + 5'000'000'000);
+    ASSERT_TRUE(s.has_value()) << s.error();
+    slow.push_back(std::move(*s));
+  }
+  std::atomic<bool> stop{false};
+  std::thread drip([&] {  // one byte of a valid magic per client per second
+    const char magic[] = {'P', 'L', 'P', 'U'};
+    for (int second = 0; !stop.load(); ++second) {
+      const auto b = static_cast<std::byte>(magic[second % 4]);
+      for (Socket& s : slow) (void)send(s.fd(), &b, 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+      for (int i = 0; i < 20 && !stop.load(); ++i) std::this_thread::sleep_for(50ms);
+    }
+  });
+  std::this_thread::sleep_for(1500ms);  // every slow client has sent its first bytes
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto st = FetchStatus(p.endpoint(), in.k, 4000ms);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  int still_open = 0;  // read what the server sent (its HELLO); EAGAIN then means no EOF yet
+  for (Socket& s : slow) {
+    std::array<char, 512> buf{};
+    ssize_t n = 0;
+    while ((n = recv(s.fd(), buf.data(), buf.size(), MSG_DONTWAIT)) > 0) {
+    }
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) ++still_open;
+  }
+  stop = true;
+  drip.join();
+  std::printf("status answered in %.1f ms with %d slow clients connected (%d still open after it)\n", ms, kSlow,
+              still_open);
+  ASSERT_TRUE(st.has_value()) << st.error().message << "\n" << p.log();
+  EXPECT_EQ(still_open, kSlow);  // served while every slow client was connected: none refused or evicted yet
+  EXPECT_LT(ms, 4000.0);
+}
+
+// Past the cap (256 connections), the oldest unauthenticated connection is closed for the newest:
+// 300 idle clients, then a status, which is answered, and palpad logs each eviction.
+TEST(UploadProcess, PastTheConnectionCapTheOldestUnauthenticatedIsEvicted) {
+  const Inputs& in = Shared();
+  Palpad p("cap", {"--net-timeout-ms", "5000"});
+  ASSERT_NE(p.port(), 0) << p.log();
+  constexpr int kIdle = 300;
+  std::vector<Socket> idle;
+  for (int i = 0; i < kIdle; ++i) {
+    auto s = ConnectTcp("127.0.0.1", p.port(), NowNs() + 5'000'000'000);
+    ASSERT_TRUE(s.has_value()) << s.error();
+    idle.push_back(std::move(*s));
+  }
+  const auto st = FetchStatus(p.endpoint(), in.k, 4000ms);
+  ASSERT_TRUE(st.has_value()) << st.error().message << "\n" << p.log();
+  const std::string log = p.log();
+  std::size_t evictions = 0;
+  for (std::size_t at = log.find("256 connections open, it was the oldest one not yet authenticated");
+       at != std::string::npos; at = log.find("it was the oldest one not yet authenticated", at + 1))
+    ++evictions;
+  EXPECT_GE(evictions, static_cast<std::size_t>(kIdle + 1 - 256)) << log;
+}
+
+// Issue 18, finding 11: a recorded reply, replayed to a later request, verifies under the key
+// but answers other nonces. The client used to call that "wrong key?", which sends the operator
+// to rotate a good key; it now says it is a replayed or stale answer. A relay between the client
+// and palpad records the first status reply and plays it back to the second request.
+TEST(UploadProcess, AReplayedReplyIsReportedAsAReplayNotAWrongKey) {
+  const Inputs& in = Shared();
+  Palpad p("replay");
+  ASSERT_NE(p.port(), 0) << p.log();
+  auto relay = ListenTcp("127.0.0.1", 0);
+  ASSERT_TRUE(relay.has_value()) << relay.error();
+  const std::uint16_t relay_port = LocalPort(relay->fd());
+  constexpr std::size_t kHello = kHeaderSize + sizeof(HelloBody) + kTagBytes;
+  constexpr std::size_t kRequest = kHeaderSize + kTagBytes;
+  constexpr std::size_t kReply = kHeaderSize + sizeof(StatusBody) + kTagBytes;
+  std::thread man_in_the_middle([&] {
+    std::vector<std::byte> recorded(kReply);
+    for (int session = 0; session < 2; ++session) {
+      const int c = accept(relay->fd(), nullptr, nullptr);
+      if (c < 0) return;
+      Socket client(c);
+      auto up = ConnectTcp("127.0.0.1", p.port(), NowNs() + 2'000'000'000);
+      if (!up) return;
+      const std::int64_t deadline = NowNs() + 3'000'000'000;
+      std::vector<std::byte> hello(kHello), request(kRequest), reply(kReply);
+      std::size_t got = 0;
+      if (RecvAll(up->fd(), hello, deadline, 0, got) != IoResult::kOk ||
+          SendAll(client.fd(), hello, deadline) != IoResult::kOk ||
+          RecvAll(client.fd(), request, deadline, 0, got) != IoResult::kOk)
+        return;
+      if (session == 0) {  // relay honestly, and keep the reply
+        if (SendAll(up->fd(), request, deadline) != IoResult::kOk ||
+            RecvAll(up->fd(), reply, deadline, 0, got) != IoResult::kOk)
+          return;
+        recorded = reply;
+      }
+      (void)SendAll(client.fd(), recorded, deadline);  // session 1: the old reply, not palpad's
+    }
+  });
+  const Endpoint via{"127.0.0.1", relay_port};
+  const auto first = FetchStatus(via, in.k, 3000ms);
+  const auto second = FetchStatus(via, in.k, 3000ms);
+  man_in_the_middle.join();
+  ASSERT_TRUE(first.has_value()) << first.error().message;
+  ASSERT_FALSE(second.has_value());
+  EXPECT_EQ(second.error().code, NetErrorCode::kBadReply);
+  EXPECT_NE(second.error().message.find("belongs to another exchange"), std::string::npos) << second.error().message;
+  EXPECT_NE(second.error().message.find("replayed or stale answer"), std::string::npos) << second.error().message;
+  EXPECT_EQ(second.error().message.find("wrong key"), std::string::npos) << second.error().message;
 }
 
 }  // namespace

@@ -303,6 +303,7 @@ bool FalconDevice::Activate() {
   if (state_ != FalconState::kReady) return false;
   state_ = FalconState::kActive;
   active_start_ns_ = transport_.NowNs();
+  still_since_ns_ = active_start_ns_;
   ticks_ = 0;
   command_ = {{0, 0, 0}, static_cast<std::uint8_t>(falcon::kControlHoming | kLedActive)};
   return true;
@@ -324,7 +325,9 @@ device::IoStatus FalconDevice::DoRead(device::HipReading& out) {
   DeviceStatus st;
   if (!Receive(st)) return device::IoStatus::kError;
   const std::int64_t now = transport_.NowNs();
+  const std::array<std::int16_t, 3> before = status_.encoders;
   if (!UpdatePose(st, now)) return device::IoStatus::kError;
+  if (!CheckEncodersMove(before, st.encoders, now)) return device::IoStatus::kError;
   for (std::size_t a = 0; a < 3; ++a) out.hip_m[a] = grip_m_[a] - config_.workspace_origin_m[a];
   out.t_s = static_cast<double>(now - active_start_ns_) * 1e-9;
   out.buttons = st.buttons;
@@ -332,12 +335,52 @@ device::IoStatus FalconDevice::DoRead(device::HipReading& out) {
   return device::IoStatus::kOk;
 }
 
+bool FalconDevice::CheckEncodersMove(const std::array<std::int16_t, 3>& before,
+                                     const std::array<std::int16_t, 3>& now_counts, std::int64_t now_ns) {
+  if (stale_ramp_start_ns_ >= 0) {  // found stale: fading, whatever the encoders do now
+    if (now_ns - stale_ramp_start_ns_ < config_.stale_ramp_ns) return true;
+    Latch(stale_fault_);
+    return false;
+  }
+  // command_ is the command this reply answers: the window restarts whenever the torque was zero
+  // (an idle grip may rest still for ever) or an encoder moved.
+  if (config_.stale_encoder_ns <= 0 || now_counts != before || command_.counts == std::array<std::int16_t, 3>{}) {
+    still_since_ns_ = now_ns;
+    return true;
+  }
+  if (now_ns - still_since_ns_ < config_.stale_encoder_ns) return true;
+  FaultInfo f;
+  f.code = FalconFault::kEncodersStale;
+  f.waited_ns = now_ns - still_since_ns_;
+  f.encoders = now_counts;
+  f.command = command_.counts;
+  f.force_n = last_force_n_;
+  if (config_.stale_ramp_ns > 0) {
+    stale_fault_ = f;
+    stale_ramp_start_ns_ = now_ns;
+    stale_ramp_from_ = command_.counts;
+    return true;
+  }
+  Latch(f);
+  return false;
+}
+
 device::IoStatus FalconDevice::DoWrite(const std::array<double, 3>& force_n) {
+  last_force_n_ = force_n;
   MotorCommand cmd;
   if (state_ == FalconState::kActive) {
     cmd.control = falcon::kControlHoming | kLedActive;
     const bool zero = force_n[0] == 0.0 && force_n[1] == 0.0 && force_n[2] == 0.0;
-    if (!zero) {
+    if (stale_ramp_start_ns_ >= 0) {
+      // Stale encoders: the held command fades (integer counts, truncated towards zero, so the
+      // torque never grows); a zero force from the loop (e-stop, stop) still zeroes it at once.
+      const std::int64_t left = config_.stale_ramp_ns - (transport_.NowNs() - stale_ramp_start_ns_);
+      for (std::size_t a = 0; a < 3; ++a)
+        cmd.counts[a] =
+            zero || left <= 0
+                ? std::int16_t{0}
+                : static_cast<std::int16_t>(std::int64_t{stale_ramp_from_[a]} * left / config_.stale_ramp_ns);
+    } else if (!zero) {
       const auto tau = jacobian_ok_ ? falcon::ForceToTorque(jacobian_, force_n) : std::nullopt;
       if (tau) {
         bool saturated = false;
@@ -368,6 +411,13 @@ device::IoStatus FalconDevice::WriteZeroAfterFault() {
   const UsbStatus s = transport_.BulkOut(p, written, config_.reply_timeout_ns / 1000);
   zero_sent_after_fault_ = s == UsbStatus::kOk && written == p.size();
   return zero_sent_after_fault_ ? device::IoStatus::kOk : device::IoStatus::kError;
+}
+
+bool FalconDevice::EmergencyZero() noexcept {
+  const falcon::Packet p =
+      falcon::EncodeCommand({{0, 0, 0}, static_cast<std::uint8_t>(falcon::kControlHoming | kLedFault)});
+  std::size_t written = 0;
+  return transport_.BulkOut(p, written, config_.reply_timeout_ns / 1000) == UsbStatus::kOk && written == p.size();
 }
 
 void FalconDevice::Shutdown() {
@@ -439,6 +489,18 @@ std::string FalconDevice::FaultMessage() const {
              "). Either nobody moved the grip, or the firmware runs with frozen encoders (a known failure after a "
              "bad load): power-cycle the Falcon and load the firmware again" +
              zero;
+    case FalconFault::kEncodersStale: {
+      char force[96];
+      std::snprintf(force, sizeof force, "%.3f N (%.3f, %.3f, %.3f)",
+                    std::sqrt(f.force_n[0] * f.force_n[0] + f.force_n[1] * f.force_n[1] + f.force_n[2] * f.force_n[2]),
+                    f.force_n[0], f.force_n[1], f.force_n[2]);
+      return "device fault: encoders frozen at " + Encoders(f.encoders) + " for " + Ms(f.waited_ns) +
+             " while commanding torque " + Encoders(f.command) + " counts for a force of " + force +
+             ": a Falcon under torque never reads exactly still (limit " + Ms(config_.stale_encoder_ns) +
+             "), so the readings no longer follow the grip (firmware stalled or encoders lost); the held torque "
+             "faded to zero over " +
+             Ms(config_.stale_ramp_ns) + where + zero;
+    }
     case FalconFault::kHomingTimeout:
       if (f.homed == falcon::kAllHomed)
         return "Falcon homed, but the grip was not pulled out (z > " + std::to_string(config_.activate_above_z_m) +

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -64,8 +65,12 @@ std::expected<std::unique_ptr<UploadListener>, std::string> UploadListener::Crea
   if (config.max_blob < blob::kHeaderSize || config.max_blob > net::kMaxBlobCap)
     return std::unexpected("--max-blob must be in " + std::to_string(blob::kHeaderSize) + ".." +
                            std::to_string(net::kMaxBlobCap) + " bytes");
+  if (config.max_connections < 1 || config.max_connections > kMaxConnections)
+    return std::unexpected("max connections must be in 1.." + std::to_string(kMaxConnections));
   if (!net::InitCrypto()) return std::unexpected(std::string("libsodium could not initialise"));
   std::unique_ptr<UploadListener> l(new UploadListener(std::move(config)));
+  l->slots_ = std::make_unique<Slot[]>(static_cast<std::size_t>(l->config_.max_connections));
+  for (int i = 0; i < l->config_.max_connections; ++i) l->slots_[static_cast<std::size_t>(i)].owner = l.get();
   l->buffer_bytes_ = static_cast<std::size_t>(l->config_.max_blob);  // ≤ 1 GiB: fits 32-bit size_t
   for (Buffer& b : l->buffers_) {
     b.data = static_cast<std::byte*>(::operator new(l->buffer_bytes_, kAlign, std::nothrow));
@@ -77,6 +82,8 @@ std::expected<std::unique_ptr<UploadListener>, std::string> UploadListener::Crea
   auto sock = net::ListenTcp(l->config_.host, l->config_.port);
   if (!sock) return std::unexpected("--listen: " + sock.error());
   l->listen_ = std::move(*sock);
+  // A deeper queue than ListenTcp's: a burst of connections waits in the kernel, not refused.
+  (void)listen(l->listen_.fd(), kListenBacklog);
   l->port_ = net::LocalPort(l->listen_.fd());
   return l;
 }
@@ -91,7 +98,7 @@ std::expected<blob::FieldView, std::string> UploadListener::LoadInitial(const st
   std::memcpy(b.data, file->data(), file->size());
   const auto view = blob::Verify(std::span<const std::byte>(b.data, file->size()));
   if (!view) return std::unexpected(path + ": " + view.error().what());
-  in_use_ = 0;
+  in_use_.store(0, std::memory_order_release);
   b.crc32c = view->crc32c;
   for (std::size_t a = 0; a < 3; ++a) b.dims[a] = static_cast<std::uint32_t>(view->dims[a]);
   b.voxel_m = view->voxel_m;
@@ -112,22 +119,90 @@ int UploadListener::Start() {
 void UploadListener::Stop() {
   quit_.store(true, std::memory_order_release);
   thread_.Join();
+  if (!slots_) return;
+  // Wake every worker blocked in a read or write; each then ends within its linger (≤ 200 ms).
+  for (int i = 0; i < config_.max_connections; ++i) {
+    Slot& s = slots_[static_cast<std::size_t>(i)];
+    if (s.busy) shutdown(s.conn.fd(), SHUT_RDWR);
+  }
+  Reap(true);
+}
+
+void UploadListener::Work(void* slot) {
+  auto& s = *static_cast<Slot*>(slot);
+  s.owner->Serve(s.conn, s.peer, s.authenticated);
+  s.done.store(true, std::memory_order_release);
+}
+
+// Accept thread: joins finished workers (all: waits for every busy one) and frees their slots.
+void UploadListener::Reap(bool all) {
+  for (int i = 0; i < config_.max_connections; ++i) {
+    Slot& s = slots_[static_cast<std::size_t>(i)];
+    if (!s.busy || (!all && !s.done.load(std::memory_order_acquire))) continue;
+    s.thread.Join();
+    s.conn = net::Socket();
+    s.busy = false;
+  }
+}
+
+// Accept thread: a free slot, evicting the oldest unauthenticated connection if none is free;
+// nullptr if every connection has authenticated (or the evicted worker did not end in 1 s).
+UploadListener::Slot* UploadListener::FreeSlot() {
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    Reap(false);
+    for (int i = 0; i < config_.max_connections; ++i)
+      if (!slots_[static_cast<std::size_t>(i)].busy) return &slots_[static_cast<std::size_t>(i)];
+    if (attempt == 1) break;
+    Slot* oldest = nullptr;
+    for (int i = 0; i < config_.max_connections; ++i) {
+      Slot& s = slots_[static_cast<std::size_t>(i)];
+      if (s.authenticated.load(std::memory_order_acquire) || s.done.load(std::memory_order_acquire)) continue;
+      if (oldest == nullptr || s.accepted_ns < oldest->accepted_ns) oldest = &s;
+    }
+    if (oldest == nullptr) return nullptr;
+    shutdown(oldest->conn.fd(), SHUT_RDWR);  // its blocked read returns; the worker ends
+    evicted_.fetch_add(1, std::memory_order_acq_rel);
+    if (config_.log)
+      config_.log("connection from " + oldest->peer + " closed: " + std::to_string(config_.max_connections) +
+                  " connections open, it was the oldest one not yet authenticated");
+    for (int wait = 0; wait < 1000 && !oldest->done.load(std::memory_order_acquire); ++wait) rt::SleepForNs(1'000'000);
+  }
+  return nullptr;
 }
 
 void UploadListener::Body(void* self) {
   auto& l = *static_cast<UploadListener*>(self);
   while (!l.quit_.load(std::memory_order_acquire)) {
     pollfd p{l.listen_.fd(), POLLIN, 0};
-    if (poll(&p, 1, 50) <= 0) continue;  // wake every 50 ms to see quit_
+    if (poll(&p, 1, 50) <= 0) {  // wake every 50 ms to see quit_ and reap finished workers
+      l.Reap(false);
+      continue;
+    }
     sockaddr_storage ss{};
     socklen_t len = sizeof ss;
     net::Socket conn(accept4(l.listen_.fd(), reinterpret_cast<sockaddr*>(&ss), &len, SOCK_CLOEXEC));
     if (!conn.valid()) continue;
-    l.Serve(conn, PeerName(ss));
+    Slot* slot = l.FreeSlot();
+    if (slot == nullptr) {
+      if (l.config_.log)
+        l.config_.log("connection from " + PeerName(ss) + " closed unanswered: " +
+                      std::to_string(l.config_.max_connections) + " authenticated connections are open");
+      continue;  // `conn` closes
+    }
+    slot->conn = std::move(conn);
+    slot->peer = PeerName(ss);
+    slot->accepted_ns = net::NowNs();
+    slot->done.store(false, std::memory_order_release);
+    slot->authenticated.store(false, std::memory_order_release);
+    slot->busy = true;
+    if (slot->thread.Start("palpad-conn", &UploadListener::Work, slot, l.config_.avoid_cpu, 128 * 1024) != 0) {
+      slot->busy = false;  // no thread: serve nobody rather than block the accept thread
+      slot->conn = net::Socket();
+    }
   }
 }
 
-void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
+void UploadListener::Serve(net::Socket& conn, const std::string& peer, std::atomic<bool>& authenticated) {
   const int fd = conn.fd();
   const std::int64_t timeout_ns = config_.read_timeout_ms * kMs;
   net::Header hello;
@@ -166,9 +241,14 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
   };
   const auto refuse = [&](net::Refusal why, const std::string& text) {
     refused_.fetch_add(1, std::memory_order_acq_rel);
+    std::uint32_t crc = 0;
+    {
+      const std::lock_guard<std::mutex> lock(meta_mutex_);
+      crc = buffers_[in_use_.load(std::memory_order_acquire)].crc32c;
+    }
     if (config_.log)
       config_.log(std::string(is_upload ? "upload" : "request") + " from " + peer + " refused: " + text +
-                  " (field in use unchanged: crc32c " + Hex32(buffers_[in_use_].crc32c) + ")");
+                  " (field in use unchanged: crc32c " + Hex32(crc) + ")");
     net::RefusedBody b;
     b.refusal = static_cast<std::uint32_t>(why);
     std::snprintf(b.text.data(), b.text.size(), "%s", text.c_str());
@@ -215,6 +295,7 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
                   "replayed: the message answers a nonce this connection did not issue (recorded earlier?)");
   if (!net::TagsEqual(net::HeaderTag(config_.key.bytes, req), req.header_tag))
     return refuse(net::Refusal::kWrongKey, "wrong key: the header's MAC does not verify with palpad's key");
+  authenticated.store(true, std::memory_order_release);  // a key holder: not evicted for a newcomer
 
   net::BodyMac mac(config_.key.bytes, req);
   std::array<unsigned char, net::kTagBytes> tag{};
@@ -227,12 +308,15 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
       return refuse(net::Refusal::kBodyTag, "body altered: the message's MAC does not verify");
     net::ControllerStatus st;
     if (config_.fill_status) config_.fill_status(st);
-    const Buffer& use = buffers_[in_use_];
     net::StatusBody b;
-    b.field_crc32c = use.crc32c;
-    b.dims = use.dims;
-    b.voxel_m = use.voxel_m;
-    b.field_bytes = use.bytes;
+    {
+      const std::lock_guard<std::mutex> lock(meta_mutex_);
+      const Buffer& use = buffers_[in_use_.load(std::memory_order_acquire)];
+      b.field_crc32c = use.crc32c;
+      b.dims = use.dims;
+      b.voxel_m = use.voxel_m;
+      b.field_bytes = use.bytes;
+    }
     b.swaps = loop_->field_epoch();
     b.ticks = st.ticks;
     b.overruns = st.overruns;
@@ -255,8 +339,14 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
     return;
   }
 
-  // UPLOAD: the header passed; ask for the body, then read it into the spare buffer.
-  const std::size_t spare = 1 - in_use_;
+  // UPLOAD: the header passed; one upload at a time owns the spare buffer.
+  // A finishing upload (its reply, a refusal's linger) releases it within ms; a running one may
+  // take long: wait up to the header deadline, then refuse.
+  std::unique_lock<std::timed_mutex> upload_lock(upload_mutex_, std::defer_lock);
+  if (!upload_lock.try_lock_for(std::chrono::milliseconds(config_.read_timeout_ms)))
+    return refuse(net::Refusal::kBusy, "busy: another upload is in progress; try again when it has finished");
+  // Ask for the body, then read it into the spare buffer.
+  const std::size_t spare = 1 - in_use_.load(std::memory_order_acquire);
   Buffer& dst = buffers_[spare];
   dst.field.reset();  // the loop no longer reads the spare (acknowledged at the last swap)
   reply(net::MessageType::kContinue, {});
@@ -290,10 +380,13 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
   const auto params = proxy::MakeProxyParams(config_.proxy, view->voxel_m);
   if (!params) return refuse(net::Refusal::kSetup, std::string("field not renderable: ") + params.error());
   dst.field.emplace(*view, *params, size);
-  dst.crc32c = view->crc32c;
-  for (std::size_t a = 0; a < 3; ++a) dst.dims[a] = static_cast<std::uint32_t>(view->dims[a]);
-  dst.voxel_m = view->voxel_m;
-  dst.bytes = size;
+  {
+    const std::lock_guard<std::mutex> lock(meta_mutex_);
+    dst.crc32c = view->crc32c;
+    for (std::size_t a = 0; a < 3; ++a) dst.dims[a] = static_cast<std::uint32_t>(view->dims[a]);
+    dst.voxel_m = view->voxel_m;
+    dst.bytes = size;
+  }
 
   // The hand-over: one exchange here, one in the loop; then wait for its acknowledgement.
   const std::uint64_t epoch = loop_->field_epoch();
@@ -308,7 +401,10 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
     }
     while (loop_->field_epoch() == epoch) rt::SleepForNs(10'000);  // taken just now: the ack follows at once
   }
-  in_use_ = spare;  // acknowledged: the old buffer is the spare from now on
+  {
+    const std::lock_guard<std::mutex> lock(meta_mutex_);
+    in_use_.store(spare, std::memory_order_release);  // acknowledged: the old buffer is the spare from now on
+  }
   accepted_.fetch_add(1, std::memory_order_acq_rel);
   const std::uint64_t swaps = loop_->field_epoch();
   if (config_.log)
@@ -321,6 +417,7 @@ void UploadListener::Serve(net::Socket& conn, const std::string& peer) {
   b.voxel_m = dst.voxel_m;
   b.swaps = swaps;
   b.field_bytes = size;
+  upload_lock.unlock();  // swapped and copied: the next upload may start while this reply goes out
   reply(net::MessageType::kUploadAccepted, Bytes(b));
 }
 

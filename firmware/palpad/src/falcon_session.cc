@@ -1,6 +1,10 @@
 #include "falcon_session.h"
 
+#include <time.h>
+#include <unistd.h>
+
 #include <cstdio>
+#include <cstring>
 #include <utility>
 
 #include "palpa/device_falcon/firmware_loader.h"
@@ -98,6 +102,22 @@ int FalconSession::Finish() {
                  static_cast<unsigned long long>(virtual_->torque_before_homed()));
   }
   return code;
+}
+
+void FalconSession::EmergencyZero(void* self) {
+  auto* s = static_cast<FalconSession*>(self);
+  auto say = [](const char* text) { (void)!write(STDERR_FILENO, text, std::strlen(text)); };
+  // Twice, 5 ms apart: a servo tick in flight on another thread (it sees the stop flag only at
+  // its next start) may send one more force after the first zero.
+  (void)s->device_->EmergencyZero();
+  const timespec pause = {0, 5'000'000};
+  (void)nanosleep(&pause, nullptr);
+  say(s->device_->EmergencyZero() ? "palpad: zero-torque packet sent to the Falcon\n"
+                                  : "palpad: the zero-torque packet could not be sent: the Falcon keeps its last "
+                                    "command (docs/falcon.md)\n");
+  if (s->virtual_ != nullptr)
+    say(s->virtual_->torque_is_zero() ? "palpad: virtual falcon: torque zero after the fatal signal\n"
+                                      : "palpad: virtual falcon: torque NOT zero after the fatal signal\n");
 }
 
 FalconSession::~FalconSession() {

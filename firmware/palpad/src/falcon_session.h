@@ -42,6 +42,10 @@ class FalconSession {
   /// stderr. Returns kExitRunFailed if the device faulted, else kExitOk.
   int Finish();
 
+  /// palpad's fatal-signal hook (signals.h): a zero-torque packet, and for the virtual Falcon
+  /// whether its motors now hold zero torque, one line each on fd 2. `self` is the session.
+  static void EmergencyZero(void* self);
+
   ~FalconSession();
 
  private:

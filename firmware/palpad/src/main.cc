@@ -32,6 +32,7 @@
 #include "palpa/trace/trace.h"
 #include "recorder.h"
 #include "scripted_swap.h"
+#include "signals.h"
 
 namespace {
 
@@ -44,18 +45,17 @@ using palpa::palpad::kExitRunFailed;
 // sample is dropped; the drain empties it every millisecond.
 constexpr std::size_t kTelemetryCapacity = 16384;
 
+// Set by every stop signal (signals.h), from the first line of main: a signal during start-up
+// ends the run before any force.
 std::atomic<bool> g_stop{false};
 
-extern "C" void OnStopSignal(int) { g_stop.store(true, std::memory_order_release); }
-
-void InstallStopHandlers() {
-  struct sigaction sa {};
-  sa.sa_handler = OnStopSignal;
-  sigemptyset(&sa.sa_mask);
-  sa.sa_flags = 0;  // no SA_RESTART: the pacing sleep returns EINTR and the loop sees the flag
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-}
+// Clears the fatal-signal hook before the device it points at goes away.
+struct EmergencyHookGuard {
+  EmergencyHookGuard() = default;
+  EmergencyHookGuard(const EmergencyHookGuard&) = delete;
+  EmergencyHookGuard& operator=(const EmergencyHookGuard&) = delete;
+  ~EmergencyHookGuard() { palpa::palpad::SetEmergencyHook(nullptr, nullptr); }
+};
 
 int Fail(int code, const std::string& message) {
   std::fprintf(stderr, "palpad: %s\n", message.c_str());
@@ -216,6 +216,9 @@ int Run(const palpa::palpad::Options& o) {
     falcon = std::move(*session);
     device = &falcon->device();
   }
+  // From here a crash commands zero torque first (best effort); cleared before `falcon` dies.
+  EmergencyHookGuard emergency_hook;
+  if (falcon) palpa::palpad::SetEmergencyHook(&palpa::palpad::FalconSession::EmergencyZero, falcon.get());
 
   palpa::servo::ServoConfig sc;
   sc.telemetry_capacity = kTelemetryCapacity;
@@ -239,7 +242,6 @@ int Run(const palpa::palpad::Options& o) {
   live_loop = &loop;
   if (listener) listener->Attach(loop);
 
-  InstallStopHandlers();
   if (falcon) {
     if (auto homed = falcon->Home(g_stop, o.home_timeout_s); !homed) {
       (void)falcon->Finish();
@@ -308,7 +310,9 @@ int Run(const palpa::palpad::Options& o) {
   const palpa::servo::RunEnd end = loop.Run(o.fast, o.rate_hz);
   loop_running.store(false, std::memory_order_release);
 
-  // After the run: non-RT again.
+  // After the run: non-RT again. The device first: zero torque and its report before any output
+  // is committed, so that an output error below cannot skip them.
+  const int device_code = falcon ? falcon->Finish() : kExitOk;
   if (listener) listener->Stop();
   watchdog.Stop();
   drain.Stop(palpa::servo::RunEndName(end));
@@ -320,7 +324,8 @@ int Run(const palpa::palpad::Options& o) {
   int code = kExitOk;
   switch (end) {
     case palpa::servo::RunEnd::kStopped:
-      std::fprintf(stderr, "palpad: stopped by signal\n");
+      std::fprintf(stderr, "palpad: stopped by signal %s: zero force written\n",
+                   palpa::palpad::SignalName(palpa::palpad::StopSignal()));
       break;
     case palpa::servo::RunEnd::kDeviceError:
       std::fprintf(stderr, "palpad: device error: zero force written, run stopped\n");
@@ -340,7 +345,11 @@ int Run(const palpa::palpad::Options& o) {
     case palpa::servo::RunEnd::kInvalidRate:
       break;
   }
-  if (falcon && falcon->Finish() != kExitOk) code = kExitRunFailed;
+  if (device_code != kExitOk) code = kExitRunFailed;
+  if (sim) {
+    const auto& f = sim->last_force_n();
+    std::fprintf(stderr, "palpad: sim device: last force written (%g, %g, %g) N\n", f[0], f[1], f[2]);
+  }
   if (loop.counters().dropped_rows != 0)
     std::fprintf(stderr, "palpad: warning: %llu telemetry samples dropped (ring full): %s misses them\n",
                  static_cast<unsigned long long>(loop.counters().dropped_rows), o.out_path.c_str());
@@ -376,6 +385,7 @@ int Run(const palpa::palpad::Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  palpa::palpad::InstallSignalHandlers(&g_stop);
   const std::span<const char* const> args(argv + 1, static_cast<std::size_t>(argc > 0 ? argc - 1 : 0));
   const auto options = palpa::palpad::ParseArgs(args);
   if (!options) {

@@ -6,6 +6,8 @@
 #include <string_view>
 #include <vector>
 
+#include "palpa/device_falcon/falcon_device.h"
+#include "palpa/device_sim/sim_device.h"
 #include "palpa/io/escape.h"
 #include "palpa/palpad/config.h"
 
@@ -31,6 +33,7 @@ const OptionSpec kSpecs[] = {
     {"--rate", nullptr, &Options::rate_hz},
     {"--k", nullptr, &Options::k_n_per_m},
     {"--max-force", nullptr, &Options::max_force_n},
+    {"--allow-unsafe-stiffness", nullptr, nullptr, &Options::allow_unsafe_stiffness},
     {"--firmware", &Options::firmware_path},
     {"--usb-index", nullptr, &Options::usb_index},
     {"--fault", &Options::faults},
@@ -78,7 +81,8 @@ bool WholeIn(double v, double lo, double hi) { return v >= lo && v <= hi && v ==
 
 // Applies the config file's entries to `o`, marking them in `from_config`. Errors name the file,
 // the line and the key.
-std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o, bool (&from_config)[kSpecCount]) {
+std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o, bool (&from_config)[kSpecCount],
+                                             int (&config_line)[kSpecCount]) {
   auto entries = ReadConfigFile(path);
   if (!entries) return std::unexpected(std::move(entries.error()));
   for (const ConfigEntry& e : *entries) {
@@ -89,6 +93,7 @@ std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o
                              "' (keys are palpad's options without the leading --)");
     const OptionSpec& opt = kSpecs[spec];
     from_config[spec] = true;
+    config_line[spec] = e.line;
     if (opt.flag != nullptr) {
       if (e.kind != ConfigEntry::Kind::kBoolean) return std::unexpected(where + ": must be true or false");
       o.*opt.flag = e.boolean;
@@ -102,6 +107,32 @@ std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o
       o.*opt.number = e.number;
     }
   }
+  return {};
+}
+
+std::string Figure(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// k and the force clamp against what the device renders (issue 18, finding 3). The proxy's own
+// bounds (MakeProxyParams) still apply after this; this check runs here so that --check-config
+// refuses what the run would refuse.
+std::expected<void, std::string> CheckDeviceLimits(const Options& o) {
+  if (!(o.k_n_per_m > 0)) return std::unexpected("--k must be a stiffness > 0 N/m, got " + Figure(o.k_n_per_m));
+  if (!(o.max_force_n > 0)) return std::unexpected("--max-force must be a force > 0 N, got " + Figure(o.max_force_n));
+  // --allow-unsafe-stiffness lifts the device's limits up to the proxy's own bounds, never beyond.
+  const device::DeviceLimits& device = o.device == "sim" ? device_sim::kSimLimits : device_falcon::kFalconLimits;
+  const device::DeviceLimits& lim = o.allow_unsafe_stiffness ? device_sim::kSimLimits : device;
+  const std::string hint =
+      &lim == &device_sim::kSimLimits ? std::string() : " (--allow-unsafe-stiffness overrides it for experiments)";
+  if (o.k_n_per_m > lim.max_stiffness_n_per_m)
+    return std::unexpected("--k " + Figure(o.k_n_per_m) + " N/m is above the " + Figure(lim.max_stiffness_n_per_m) +
+                           " N/m that " + lim.name + " renders stably (" + lim.source + ")" + hint);
+  if (o.max_force_n > lim.max_force_n)
+    return std::unexpected("--max-force " + Figure(o.max_force_n) + " N is above the " + Figure(lim.max_force_n) +
+                           " N force rating of " + lim.name + " (" + lim.source + ")" + hint);
   return {};
 }
 
@@ -197,7 +228,7 @@ const char* Usage() {
          "  --usb-index N         falcon: the N-th attached Falcon (default 0)\n"
          "  --fault LIST          virtual-falcon: inject faults, e.g. split@0,unplug@500 (docs/falcon.md)\n"
          "  --home-timeout S      falcon devices: homing time limit in s (default 60)\n"
-         "  --field PATH          signed distance field, blob v1 (palpa build)\n"
+         "  --field PATH          signed distance field, a blob v1 or v2 (palpa build)\n"
          "  --trace PATH          HIP trace CSV t_s,x_m,y_m,z_m (required for sim)\n"
          "  --out PATH            per-tick CSV, written as the run goes, renamed into place at the end\n"
          "                        (/dev/null: none)\n"
@@ -205,6 +236,9 @@ const char* Usage() {
          "  --rate HZ             tick rate, 1..10000 (default 1000); sim replays at t = tick/rate\n"
          "  --k N_PER_M           stiffness k (default 800)\n"
          "  --max-force N         force clamp (default 8)\n"
+         "                        k and the clamp must not exceed what the device renders: Falcon\n"
+         "                        3000 N/m and 8 N (CHAI3D's specification); sim 1e5 N/m and 100 N\n"
+         "  --allow-unsafe-stiffness  experiments only: accept k or a clamp above the device's limits\n"
          "  --summary-json PATH   also write the summary as JSON\n"
          "  --status PATH         live status JSON, rewritten once a second (e.g. /run/palpa/status.json)\n"
          "  --latency-histogram PATH  after the run: the wake-up latency histogram, 1 us bins, in\n"
@@ -253,6 +287,8 @@ std::expected<Options, std::string> ParseArgs(std::span<const char* const> args)
   // Pass 1: the config file, if any, sets the starting values.
   Options o;
   bool from_config[kSpecCount] = {};
+  int config_line[kSpecCount] = {};
+  std::string config_path;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string_view arg(args[i]);
     std::string_view path;
@@ -264,7 +300,8 @@ std::expected<Options, std::string> ParseArgs(std::span<const char* const> args)
       continue;
     }
     if (path.empty()) return std::unexpected("--config needs a non-empty value");
-    if (auto applied = ApplyConfig(std::string(path), o, from_config); !applied)
+    config_path = std::string(path);
+    if (auto applied = ApplyConfig(config_path, o, from_config, config_line); !applied)
       return std::unexpected(std::move(applied.error()));
     break;  // a second --config is reported as "given twice" below
   }
@@ -308,26 +345,41 @@ std::expected<Options, std::string> ParseArgs(std::span<const char* const> args)
   for (std::size_t i = 0; i < kSpecCount; ++i) given[i] = seen[i] || from_config[i];
   const auto was_given = [&](std::string_view option) { return given[FindSpec(option)]; };
 
-  if (o.device.empty()) o.device = "sim";  // the simulated device is the default
-  if (o.device != "sim" && o.device != "falcon" && o.device != "virtual-falcon")
-    return std::unexpected("--device: unknown device '" + o.device + "' (sim, falcon or virtual-falcon)");
-  if (o.device == "virtual-falcon" && o.trace_path.empty())
-    return std::unexpected("--trace is required with --device virtual-falcon");
-  if (o.device == "falcon" && !o.trace_path.empty())
-    return std::unexpected("--trace: the real Falcon is moved by hand (use --device virtual-falcon to replay)");
-  if (o.device == "sim" && !o.firmware_path.empty()) return std::unexpected("--firmware needs a Falcon device");
-  if (o.device != "falcon" && was_given("--usb-index")) return std::unexpected("--usb-index needs --device falcon");
-  if (o.device != "virtual-falcon" && !o.faults.empty())
-    return std::unexpected("--fault needs --device virtual-falcon");
-  if (!(o.usb_index >= 0 && o.usb_index <= 127 && o.usb_index == std::floor(o.usb_index)))
-    return std::unexpected("--usb-index must be a whole number in 0..127");
-  if (!(o.home_timeout_s >= 1 && o.home_timeout_s <= 3600))
-    return std::unexpected("--home-timeout must be in 1..3600 s");
-  if (o.field_path.empty()) return std::unexpected("--field is required");
-  if (o.out_path.empty()) return std::unexpected("--out is required");
-  if (o.device == "sim" && o.trace_path.empty()) return std::unexpected("--trace is required with --device sim");
-  if (!(o.rate_hz >= 1 && o.rate_hz <= 10000)) return std::unexpected("--rate must be in 1..10000 Hz");
-  if (auto runtime = CheckRuntime(o, given); !runtime) return std::unexpected(std::move(runtime.error()));
+  // Every range check below names its option first ("--rate must be …"); when that value came
+  // from the config file, the message also names the file and the line (issue 18, finding 11).
+  const auto checks = [&]() -> std::expected<void, std::string> {
+    if (o.device.empty()) o.device = "sim";  // the simulated device is the default
+    if (o.device != "sim" && o.device != "falcon" && o.device != "virtual-falcon")
+      return std::unexpected("--device: unknown device '" + o.device + "' (sim, falcon or virtual-falcon)");
+    if (o.device == "virtual-falcon" && o.trace_path.empty())
+      return std::unexpected("--trace is required with --device virtual-falcon");
+    if (o.device == "falcon" && !o.trace_path.empty())
+      return std::unexpected("--trace: the real Falcon is moved by hand (use --device virtual-falcon to replay)");
+    if (o.device == "sim" && !o.firmware_path.empty()) return std::unexpected("--firmware needs a Falcon device");
+    if (o.device != "falcon" && was_given("--usb-index")) return std::unexpected("--usb-index needs --device falcon");
+    if (o.device != "virtual-falcon" && !o.faults.empty())
+      return std::unexpected("--fault needs --device virtual-falcon");
+    if (!(o.usb_index >= 0 && o.usb_index <= 127 && o.usb_index == std::floor(o.usb_index)))
+      return std::unexpected("--usb-index must be a whole number in 0..127");
+    if (!(o.home_timeout_s >= 1 && o.home_timeout_s <= 3600))
+      return std::unexpected("--home-timeout must be in 1..3600 s");
+    if (o.field_path.empty()) return std::unexpected("--field is required");
+    if (o.out_path.empty()) return std::unexpected("--out is required");
+    if (o.device == "sim" && o.trace_path.empty()) return std::unexpected("--trace is required with --device sim");
+    if (!(o.rate_hz >= 1 && o.rate_hz <= 10000)) return std::unexpected("--rate must be in 1..10000 Hz");
+    if (auto limits = CheckDeviceLimits(o); !limits) return std::unexpected(std::move(limits.error()));
+    if (auto runtime = CheckRuntime(o, given); !runtime) return std::unexpected(std::move(runtime.error()));
+    return {};
+  };
+  if (auto checked = checks(); !checked) {
+    const std::string& message = checked.error();
+    const std::size_t end = message.find_first_of(" =':");
+    const std::size_t spec = FindSpec(std::string_view(message).substr(0, end));
+    if (spec < kSpecCount && from_config[spec] && !seen[spec])
+      return std::unexpected(config_path + ":" + std::to_string(config_line[spec]) + ": key '" +
+                             std::string(kSpecs[spec].name.substr(2)) + "': " + message);
+    return std::unexpected(message);
+  }
   return o;
 }
 

@@ -24,6 +24,7 @@
 #include <utility>
 
 #include "palpa/io/file_safety.h"
+#include "palpa/rt/temp_registry.h"
 #include "palpa/servo/telemetry_drain.h"
 #include "palpa/trace/trace.h"
 
@@ -105,6 +106,7 @@ class Recorder final : public servo::TelemetrySink {
     std::string path, temp;
     std::FILE* file = nullptr;
     bool committed = false;
+    int slot = -1;  // rt::RegisterTempPath slot of `temp`
     std::string Open(const std::string& p) {
       path = p;
       if (auto ok = io::CheckOutputTarget(p); !ok) return ok.error().message;  // never over a device (issue 18)
@@ -120,16 +122,17 @@ class Recorder final : public servo::TelemetrySink {
         unlink(temp.c_str());
         return "cannot open " + temp;
       }
+      slot = rt::RegisterTempPath(temp.c_str());  // a fatal signal unlinks it
       return {};
     }
     std::string Commit() {
       const bool ok = std::fflush(file) == 0 && fsync(fileno(file)) == 0;
       const bool closed = std::fclose(file) == 0;
       file = nullptr;
-      if (!ok || !closed || std::rename(temp.c_str(), path.c_str()) != 0) {
-        unlink(temp.c_str());
-        return "cannot write " + path + ": " + std::strerror(errno);
-      }
+      const bool renamed = ok && closed && std::rename(temp.c_str(), path.c_str()) == 0;
+      if (!renamed) unlink(temp.c_str());
+      rt::UnregisterTempPath(std::exchange(slot, -1));
+      if (!renamed) return "cannot write " + path + ": " + std::strerror(errno);
       committed = true;
       return {};
     }
@@ -138,6 +141,7 @@ class Recorder final : public servo::TelemetrySink {
         std::fclose(file);
         unlink(temp.c_str());
       }
+      rt::UnregisterTempPath(slot);
     }
   };
 

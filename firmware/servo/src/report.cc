@@ -1,5 +1,7 @@
 #include "palpa/servo/report.h"
 
+#include "palpa/rt/temp_registry.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -74,19 +76,22 @@ std::expected<AtomicFile, std::string> AtomicFile::Create(const std::string& pat
     unlink(temp.c_str());
     return std::unexpected(std::move(message));
   }
-  return AtomicFile(path, std::move(temp), f);
+  const int slot = rt::RegisterTempPath(temp.c_str());
+  return AtomicFile(path, std::move(temp), f, slot);
 }
 
 AtomicFile::AtomicFile(AtomicFile&& other) noexcept
     : path_(std::move(other.path_)),
       temp_path_(std::move(other.temp_path_)),
-      file_(std::exchange(other.file_, nullptr)) {}
+      file_(std::exchange(other.file_, nullptr)),
+      temp_slot_(std::exchange(other.temp_slot_, -1)) {}
 
 AtomicFile::~AtomicFile() {
   if (file_ != nullptr) {
     std::fclose(file_);
     unlink(temp_path_.c_str());
   }
+  rt::UnregisterTempPath(temp_slot_);
 }
 
 std::expected<void, std::string> AtomicFile::Commit() {
@@ -106,10 +111,9 @@ std::expected<void, std::string> AtomicFile::Commit() {
     ok = false;
     message = ErrnoMessage("cannot rename the temporary file onto", path_);
   }
-  if (!ok) {
-    unlink(temp_path_.c_str());
-    return std::unexpected(std::move(message));
-  }
+  if (!ok) unlink(temp_path_.c_str());
+  rt::UnregisterTempPath(std::exchange(temp_slot_, -1));  // renamed or removed: nothing left to clean
+  if (!ok) return std::unexpected(std::move(message));
   // Make the rename itself durable. Failing here leaves a complete file, so it is not an error.
   const int dir = open(DirectoryOf(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dir >= 0) {

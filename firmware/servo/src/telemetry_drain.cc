@@ -4,6 +4,7 @@
 #include <ctime>
 
 #include "palpa/io/file_safety.h"
+#include "palpa/rt/temp_registry.h"
 #include "palpa/servo/report.h"
 
 namespace palpa::servo {
@@ -117,12 +118,18 @@ bool TelemetryDrain::WriteStatus(const char* state) {
   // Re-checked on every write: rename() would replace a device or FIFO put there meanwhile.
   if (!io::CheckOutputTarget(config_.status_path)) return false;
   const std::string temp = config_.status_path + ".tmp";
+  // Registered while it exists, so that a fatal signal between fopen and rename removes it.
+  const int slot = rt::RegisterTempPath(temp.c_str());
   std::FILE* f = std::fopen(temp.c_str(), "w");
-  if (f == nullptr) return false;  // a live view: a failed update is retried next period
+  if (f == nullptr) {
+    rt::UnregisterTempPath(slot);
+    return false;  // a live view: a failed update is retried next period
+  }
   const bool ok = std::fputs(json.c_str(), f) >= 0;
-  if (std::fclose(f) == 0 && ok && std::rename(temp.c_str(), config_.status_path.c_str()) == 0) return true;
-  (void)std::remove(temp.c_str());
-  return false;
+  const bool renamed = std::fclose(f) == 0 && ok && std::rename(temp.c_str(), config_.status_path.c_str()) == 0;
+  if (!renamed) (void)std::remove(temp.c_str());
+  rt::UnregisterTempPath(slot);
+  return renamed;
 }
 
 }  // namespace palpa::servo

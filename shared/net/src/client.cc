@@ -81,6 +81,8 @@ struct Reply {
   Header header;
   std::vector<std::byte> body;
   bool authenticated = false;
+  bool mac_ok = false;        // its MACs verify under our key (it came from a palpad holding our key)
+  bool nonces_match = false;  // it answers this request (both nonces echoed)
 };
 
 std::expected<Reply, NetError> ReadReply(const Session& s, const Key& key, const Endpoint& to,
@@ -99,8 +101,9 @@ std::expected<Reply, NetError> ReadReply(const Session& s, const Key& key, const
     return std::unexpected(IoErr(io, to, "reading the controller's answer"));
   BodyMac mac(key.bytes, r.header);
   mac.Update(r.body);
-  r.authenticated = r.header.server_nonce == s.hello.server_nonce && r.header.client_nonce == s.client_nonce &&
-                    TagsEqual(HeaderTag(key.bytes, r.header), r.header.header_tag) && TagsEqual(mac.Final(), tag);
+  r.nonces_match = r.header.server_nonce == s.hello.server_nonce && r.header.client_nonce == s.client_nonce;
+  r.mac_ok = TagsEqual(HeaderTag(key.bytes, r.header), r.header.header_tag) && TagsEqual(mac.Final(), tag);
+  r.authenticated = r.nonces_match && r.mac_ok;
   return r;
 }
 
@@ -114,9 +117,18 @@ NetError RefusalOrBadReply(const Reply& r, const Endpoint& to) {
     if (!r.authenticated) e.message += " (this answer is not authenticated under our key)";
     return e;
   }
+  // A reply whose MACs verify but whose nonces belong to another exchange is a replay (or a stale
+  // answer), not a key problem: say which, so nobody rotates a good key.
+  if (!r.authenticated && r.mac_ok)
+    return Err(NetErrorCode::kBadReply, Where(to) +
+                                            ": the controller's answer is signed with this key but belongs to "
+                                            "another exchange (its nonces are not this request's): a replayed or "
+                                            "stale answer, ignored");
   if (!r.authenticated)
     return Err(NetErrorCode::kBadReply,
-               Where(to) + ": the controller's answer does not authenticate with this key (wrong key?)");
+               Where(to) +
+                   ": the controller's answer does not authenticate with this key (a different key, or "
+                   "altered in transit)");
   return Err(NetErrorCode::kProtocol, Where(to) + ": unexpected answer type " + std::to_string(r.header.type));
 }
 

@@ -13,7 +13,9 @@
 // packet carries the homing bit ("must be set in each packet for the Falcon to stay homed").
 // Safety (docs/falcon.md §4): torque is non-zero only in Active, i.e. after all three axes
 // reported homed; a reply missing for more than 2 ms, a lost device, a USB error, an encoder jump
-// beyond a physical bound, a lost homed flag or a failed forward kinematics each latch Fault: the
+// beyond a physical bound, a lost homed flag, a failed forward kinematics or encoders that stay
+// exactly still for stale_encoder_ns while torque is commanded (frozen firmware; its held torque first
+// fades to zero over stale_ramp_ns) each latch Fault: the
 // read reports kError, the loop writes zero force, which DoWrite turns into a zero-torque packet
 // (best effort when the device is gone). FaultMessage() says what happened, for people.
 //
@@ -28,12 +30,20 @@
 #include <string>
 
 #include "palpa/device/haptic_device.h"
+#include "palpa/device/limits.h"
 #include "palpa/device_falcon/firmware_loader.h"
 #include "palpa/device_falcon/transport.h"
 #include "palpa/falcon/codec.h"
 #include "palpa/falcon/kinematics.h"
 
 namespace palpa::device_falcon {
+
+/// The Falcon's limits: CHAI3D's device specification for it (cFalconDevice's constructor,
+/// src/devices/CFalconDevice.cpp: m_maxForceStiffness = 3000 N/m, m_maxForce = 8 N). Above
+/// 3000 N/m a 1 kHz loop on the Falcon's arms goes unstable (buzz, then limit cycles); above 8 N
+/// the amplifiers saturate (docs/falcon.md §4: commands beyond ±4095 counts are scaled down).
+inline constexpr device::DeviceLimits kFalconLimits = {"the Novint Falcon", 3000.0, 8.0,
+                                                       "CHAI3D's Falcon specification, cFalconDevice: 3000 N/m, 8 N"};
 
 enum class FalconState { kUnconfigured, kInactive, kReady, kActive, kFault, kFinalized };
 const char* FalconStateName(FalconState s);
@@ -53,6 +63,7 @@ enum class FalconFault {
   kLostHoming,      ///< a homed flag dropped while active
   kKinematics,      ///< forward kinematics found no pose for the encoders
   kEncodersFrozen,  ///< homing: replies came but no encoder ever changed
+  kEncodersStale,   ///< active: no encoder changed for stale_encoder_ns while non-zero torque was commanded
   kHomingTimeout,   ///< homing: encoders moved but the three homed flags (or the pull-out) never came
   kNotActive,       ///< Read before Activate (programming error)
 };
@@ -71,6 +82,8 @@ struct FaultInfo {
   std::array<std::int16_t, 3> encoders{};
   std::uint8_t homed = 0;
   int fk_error = 0;
+  std::array<std::int16_t, 3> command{};  ///< stale encoders: the motor command (counts) held meanwhile
+  std::array<double, 3> force_n{};        ///< stale encoders: the force (N, device frame) asked for last
 };
 
 /// Counters the servo thread writes (house style §5).
@@ -100,6 +113,16 @@ struct FalconConfig {
   /// (libnifalcon's test scenes and VRPN wait for z > 0.170): the HIP then starts outside any
   /// object palpa centres at the workspace origin, so the proxy starts outside too.
   double activate_above_z_m = 0.170;
+  /// Device supervision in contact (docs/falcon.md §5): the encoders of a Falcon under torque are
+  /// never exactly still (±1 count of noise, hand tremor of several counts), so all three encoders
+  /// reading exactly the same while every command of this long carried non-zero torque means the
+  /// firmware stopped updating them (frozen@N); 0: off. Measured on the transport clock.
+  std::int64_t stale_encoder_ns = 500'000'000;
+  /// Once the encoders are found stale, the motor command held at that moment fades linearly to
+  /// zero over this long before the fault latches (issue 18: a fault ramps to zero rather than
+  /// dropping up to 8 N from under a hand that leans on it). The pose is unknown meanwhile, so no
+  /// new force is computed: the loop's force is ignored and only the held torque shrinks. 0: step.
+  std::int64_t stale_ramp_ns = 50'000'000;
   std::uint64_t tick_limit = 0;  ///< Read answers kEnd after this many ticks (0: never; a replay sets it)
   falcon::FkConfig fk;
 };
@@ -140,6 +163,12 @@ class FalconDevice final : public device::HapticDevice {
   /// reply. Idempotent. Non-RT.
   void Shutdown();
 
+  /// From a fatal-signal handler (palpad's crash path): one zero-torque packet with the fault
+  /// LEDs, no reply read, no state change. Allocation-free; async-signal-safe only as far as the
+  /// transport is (the virtual Falcon is; libusb is not: palpad bounds the call with alarm(2)).
+  /// True if the transport took the whole packet.
+  bool EmergencyZero() noexcept;
+
   FalconState state() const { return state_; }
   const FaultInfo& fault() const { return fault_; }
   /// The fault for people, one or two sentences; empty without a fault. Non-RT.
@@ -162,6 +191,8 @@ class FalconDevice final : public device::HapticDevice {
   void Latch(FaultInfo info);
   void LatchUsb(UsbStatus s);
   device::IoStatus WriteZeroAfterFault();
+  bool CheckEncodersMove(const std::array<std::int16_t, 3>& before, const std::array<std::int16_t, 3>& now_counts,
+                         std::int64_t now_ns);
 
   FalconTransport& transport_;
   FalconConfig config_;
@@ -180,6 +211,11 @@ class FalconDevice final : public device::HapticDevice {
   falcon::Mat3 jacobian_{};
   bool jacobian_ok_ = false;
   bool zero_sent_after_fault_ = false;
+  std::int64_t still_since_ns_ = 0;                // encoders unchanged, torque non-zero, since then
+  std::int64_t stale_ramp_start_ns_ = -1;          // ≥ 0: stale encoders found, the held torque is fading
+  std::array<std::int16_t, 3> stale_ramp_from_{};  // the command held when they were found
+  FaultInfo stale_fault_;                          // latched when the fade ends
+  std::array<double, 3> last_force_n_{};           // the force DoWrite was asked for last
 };
 
 }  // namespace palpa::device_falcon

@@ -13,9 +13,15 @@
 #include <vector>
 
 #include "palpa/device/haptic_device.h"
+#include "palpa/device/limits.h"
 #include "palpa/trace/trace.h"
 
 namespace palpa::device_sim {
+
+/// A replay pushes on nothing, so its limits are the proxy's own bounds (proxy::MakeProxyParams:
+/// k ≤ 1e5 N/m, |f| ≤ 100 N); a non-finite, negative or zero k or force is refused all the same.
+inline constexpr device::DeviceLimits kSimLimits = {"the simulated device", 1e5, 100.0,
+                                                    "the proxy's bounds, proxy::MakeProxyParams"};
 
 class SimDevice final : public device::HapticDevice {
  public:

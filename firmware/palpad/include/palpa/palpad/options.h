@@ -23,7 +23,7 @@ inline constexpr int kExitNoDevice = 3;   ///< the device is not available (no F
 /// Parsed options; defaults as documented in Usage().
 struct Options {
   std::string device;             ///< "sim" (default), "falcon" or "virtual-falcon"
-  std::string field_path;         ///< blob v1
+  std::string field_path;         ///< blob v1 or v2
   std::string trace_path;         ///< HIP trace (required for --device sim)
   std::string out_path;           ///< output CSV
   std::string summary_json_path;  ///< empty: no JSON summary
@@ -33,9 +33,12 @@ struct Options {
   double home_timeout_s = 60;     ///< falcon/virtual-falcon: homing time limit, 1..3600 s
   bool fast = false;
   double rate_hz = 1000;   ///< 1..10000
-  double k_n_per_m = 800;  ///< checked by proxy::MakeProxyParams
-  double max_force_n = 8;  ///< checked by proxy::MakeProxyParams
-  bool help = false;       ///< --help/-h given: print Usage(), ignore the rest
+  double k_n_per_m = 800;  ///< > 0 and ≤ the device's limit (device/limits.h), unless allow_unsafe_stiffness
+  double max_force_n = 8;  ///< > 0 and ≤ the device's force rating, unless allow_unsafe_stiffness
+  /// --allow-unsafe-stiffness: experiments only: k and max force above the device's limits (still
+  /// within the proxy's bounds, 1e5 N/m and 100 N).
+  bool allow_unsafe_stiffness = false;
+  bool help = false;  ///< --help/-h given: print Usage(), ignore the rest
 
   // Runtime (issue 9, docs/runtime.md).
   std::string config_path;             ///< --config: TOML file read before the command line

@@ -28,7 +28,8 @@ bool WriteCsvRow(std::FILE* out, const LogRow& row);
 
 /// A file written under a temporary name in the target's directory and renamed over the target
 /// only by Commit(), after fsync: readers see the old file or the complete new one, never a part.
-/// Destroying an uncommitted AtomicFile removes the temporary file.
+/// Destroying an uncommitted AtomicFile removes the temporary file; a fatal signal removes it too
+/// (its name is in palpa/rt/temp_registry.h while it exists).
 class AtomicFile {
  public:
   /// Creates `<path>.tmp.XXXXXX` (mode 0666 minus umask). Error: a sentence naming the path.
@@ -46,12 +47,13 @@ class AtomicFile {
   std::expected<void, std::string> Commit();
 
  private:
-  AtomicFile(std::string path, std::string temp_path, std::FILE* file)
-      : path_(std::move(path)), temp_path_(std::move(temp_path)), file_(file) {}
+  AtomicFile(std::string path, std::string temp_path, std::FILE* file, int temp_slot)
+      : path_(std::move(path)), temp_path_(std::move(temp_path)), file_(file), temp_slot_(temp_slot) {}
 
   std::string path_;
   std::string temp_path_;
   std::FILE* file_ = nullptr;
+  int temp_slot_ = -1;  // rt::RegisterTempPath slot of temp_path_
 };
 
 /// WriteCsv through an AtomicFile.
