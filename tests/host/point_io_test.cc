@@ -1,7 +1,12 @@
+#include <sys/resource.h>
+#include <sys/stat.h>
+
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -312,6 +317,114 @@ TEST(ReadPly, BadHeadersNameTheLine) {
   EXPECT_EQ(error_of("word.ply", word), ":16: 'x' is not a valid integer for vertex 1 of 4 'red'");
   EXPECT_EQ(error_of("short.ply", text.substr(0, text.find("0 0 1 0 -1"))),
             ":18: the file ends before vertex 3 of 4 'x'");
+}
+
+// Issue 18, finding 5: ascii PLY is read per line; a vertex line with a value too few or too many
+// no longer shifts every later vertex.
+TEST(ReadPly, AsciiLineWithTheWrongValueCountIsRefusedNamingTheLine) {
+  const auto error_of = [](std::string_view name, std::string text) {
+    const TempFile file(name, text);
+    const auto points = ReadPoints(file.path());
+    EXPECT_FALSE(points.has_value()) << name;
+    return points ? std::string() : points.error().message.substr(file.path().string().size());
+  };
+  std::string five = kAsciiPly;  // vertex 1 (line 16) loses its nz
+  five.replace(five.find("1 0 0 7 0 2 0\n"), 14, "1 0 0 7 0 2\n");
+  EXPECT_EQ(error_of("five.ply", five),
+            ":16: the line ends before vertex 1 of 4 'nz' (6 values on the line, more expected)");
+  std::string seven = kAsciiPly;  // vertex 1 gains an eighth value
+  seven.replace(seven.find("1 0 0 7 0 2 0\n"), 14, "1 0 0 7 0 2 0 5\n");
+  EXPECT_EQ(error_of("seven.ply", seven),
+            ":16: vertex 1 of 4 has more values than the header's properties (8 on the line, 7 expected)");
+}
+
+// Finding 5: a count of 2^64 or more read as 0 (from_chars' overflow went unchecked); a count far
+// beyond what the file holds is refused before the body is read.
+TEST(ReadPly, ElementCountsBeyondTwoToTheSixtyFourOrTheFileAreRefused) {
+  std::string huge = kAsciiPly;
+  huge.replace(huge.find("element vertex 4"), 16, "element vertex 18446744073709551616");
+  const TempFile a("huge.ply", huge);
+  const auto ra = ReadPoints(a.path());
+  ASSERT_FALSE(ra.has_value());
+  EXPECT_EQ(ra.error().message, a.path().string() + ":4: element count '18446744073709551616' is not below 2^64");
+  std::string absurd = kAsciiPly;
+  absurd.replace(absurd.find("element vertex 4"), 16, "element vertex 18446744073709551615");
+  const TempFile b("absurd.ply", absurd);
+  const auto rb = ReadPoints(b.path());
+  ASSERT_FALSE(rb.has_value());
+  EXPECT_THAT(rb.error().message,
+              HasSubstr("declares 18446744073709551615 'vertex' elements, but the 69 bytes after it hold at most 5"));
+}
+
+// Findings 6 and 8: a file that is not a regular file is refused before any read; a line or header
+// without end is refused after a bounded read; messages quote input bytes escaped and cut.
+TEST(ReadPoints, NonRegularFilesAreRefusedAtOnce) {
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "nonregular";
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path fifo = dir / "fifo.xyz";
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const auto f = ReadPoints(fifo);  // used to block in open() for ever
+  ASSERT_FALSE(f.has_value());
+  EXPECT_THAT(f.error().message, HasSubstr("fifo.xyz: is a FIFO, not a regular file"));
+  std::filesystem::remove(fifo);
+  std::filesystem::create_symlink("/dev/zero", dir / "zero.ply");
+  const auto z = ReadPoints(dir / "zero.ply");
+  ASSERT_FALSE(z.has_value());
+  EXPECT_THAT(z.error().message, HasSubstr("zero.ply: is a character device, not a regular file"));
+  std::filesystem::remove_all(dir);
+}
+
+long MaxRssKiB() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss;
+}
+
+TEST(ReadPoints, HugeFilesAreRefusedAfterABoundedRead) {
+  // 2 GiB of NULs (sparse: no disk used). The old reader held it all (6.3 GB), then put the whole
+  // file in its message.
+  const long rss0 = MaxRssKiB();
+  for (const char* name : {"nul.xyz", "nul.ply", "comments.ply"}) {
+    const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / name;
+    {
+      std::ofstream out(path, std::ios::binary);
+      if (std::string_view(name) == "comments.ply") {
+        out << "ply\nformat ascii 1.0\n";
+        for (int i = 0; i < 10000; ++i) out << "comment no end of header in sight\n";
+      }
+    }
+    if (std::string_view(name) != "comments.ply") std::filesystem::resize_file(path, std::uint64_t{2} << 30);
+    const auto r = ReadPoints(path);
+    std::filesystem::remove(path);
+    ASSERT_FALSE(r.has_value()) << name;
+    EXPECT_LT(r.error().message.size(), 400U) << name;
+    if (std::string_view(name) == "nul.xyz") {
+      EXPECT_EQ(r.error().message,
+                path.string() + ":1: the line is longer than 4096 bytes (a point is one line of six numbers)");
+    }
+    if (std::string_view(name) == "nul.ply") {
+      EXPECT_EQ(r.error().message, path.string() + ": the PLY file holds 2147483648 bytes; at most 1 GiB are read");
+    }
+    if (std::string_view(name) == "comments.ply") {
+      EXPECT_EQ(r.error().message, path.string() + ": the header has no 'end_header' line in its first 64 KiB");
+    }
+  }
+  EXPECT_LT(MaxRssKiB() - rss0, 64 * 1024);  // bounded: well under 64 MiB more than before
+}
+
+TEST(ReadPoints, MessagesEscapeAndCutInputBytes) {
+  const TempFile esc("esc.xyz", "0 0 0 0 0 1\n1 \x1b]0;owned\x07 0 0 0 1\n");
+  const auto e = ReadPoints(esc.path());
+  ASSERT_FALSE(e.has_value());
+  EXPECT_EQ(e.error().message, esc.path().string() + ":2: '\\x1b]0;owned\\x07' is not a number");
+  std::string digits = kAsciiPly;
+  digits.replace(digits.find("1 0 0 7"), 1, std::string(100000, '9') + "x");
+  const TempFile big("digits.ply", digits);
+  const auto d = ReadPoints(big.path());
+  ASSERT_FALSE(d.has_value());
+  EXPECT_EQ(d.error().message,
+            big.path().string() + ":16: '" + std::string(64, '9') + "…' is not a valid number for vertex 1 of 4 'x'");
 }
 
 TEST(ReadPly, BundledKittenAsBinaryPlyEqualsTheXyz) {

@@ -2,14 +2,20 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string_view>
 
 #include <toml++/toml.h>
 
+#include "palpa/io/escape.h"
+#include "palpa/io/file_safety.h"
+
 namespace palpa::palpad {
 namespace {
+
+constexpr std::uint64_t kMaxConfigBytes = 1 << 20;  // a config is a few dozen lines
 
 const char* TypeName(toml::node_type t) {
   switch (t) {
@@ -36,7 +42,7 @@ std::expected<std::vector<ConfigEntry>, std::string> ParseConfigText(const std::
   if (!parsed) {
     const toml::parse_error& e = parsed.error();
     return std::unexpected(source + ":" + std::to_string(e.source().begin.line) + ":" +
-                           std::to_string(e.source().begin.column) + ": " + std::string(e.description()));
+                           std::to_string(e.source().begin.column) + ": " + io::Escape(e.description(), 256));
   }
   std::vector<ConfigEntry> entries;
   for (auto&& [key, node] : parsed.table()) {
@@ -67,16 +73,10 @@ std::expected<std::vector<ConfigEntry>, std::string> ParseConfigText(const std::
 }
 
 std::expected<std::vector<ConfigEntry>, std::string> ReadConfigFile(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) return std::unexpected(path + ": cannot read the config file: " + std::strerror(errno));
-  std::string text;
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
-  const bool failed = std::ferror(f) != 0;
-  std::fclose(f);
-  if (failed) return std::unexpected(path + ": cannot read the config file");
-  return ParseConfigText(text, path);
+  // A regular file of at most 1 MiB (a FIFO or /dev/zero is refused before any read).
+  auto text = io::ReadBoundedText(path, kMaxConfigBytes, "config file");
+  if (!text) return std::unexpected(std::move(text.error().message));
+  return ParseConfigText(*text, path);
 }
 
 }  // namespace palpa::palpad

@@ -19,6 +19,7 @@
 #include "palpa/blob/blob.h"
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/gpio_linux/gpiod_lines.h"
+#include "palpa/io/file_safety.h"
 #include "palpa/net/client.h"
 #include "palpa/net_server/listener.h"
 #include "palpa/palpad/options.h"
@@ -69,7 +70,26 @@ void OnWatchdogTrip(void*, std::int64_t stalled_ns) {
                static_cast<double>(stalled_ns) / 1e6);
 }
 
+// Every output palpad replaces must be a regular file (or new) and none of its inputs (issue 18):
+// checked before anything is read or moved. "--out /dev/null" writes no CSV at all, so it passes.
+int CheckOutputs(const palpa::palpad::Options& o) {
+  const std::vector<std::string> inputs = {o.field_path, o.trace_path,    o.config_path,
+                                           o.key_file,   o.swap_at_field, o.firmware_path};
+  const std::pair<const char*, const std::string*> outputs[] = {
+      {"--out", &o.out_path},       {"--summary-json", &o.summary_json_path},
+      {"--status", &o.status_path}, {"--latency-histogram", &o.latency_histogram_path},
+      {"--record", &o.record_path}, {"--record-timing", &o.record_timing_path}};
+  for (const auto& [option, path] : outputs) {
+    if (path->empty() || (path == &o.out_path && *path == "/dev/null")) continue;
+    if (auto ok = palpa::io::CheckOutputTarget(*path, inputs); !ok)
+      return Fail(ok.error().fault == palpa::io::Fault::kBadInput ? kExitBadInput : kExitRunFailed,
+                  std::string(option) + " " + ok.error().message);
+  }
+  return kExitOk;
+}
+
 int Run(const palpa::palpad::Options& o) {
+  if (const int refused = CheckOutputs(o); refused != kExitOk) return refused;
   palpa::proxy::ProxyConfig config;
   config.k_n_per_m = o.k_n_per_m;
   config.max_force_n = o.max_force_n;

@@ -8,6 +8,7 @@
 
 #include "palpa/device_falcon/falcon_device.h"
 #include "palpa/device_sim/sim_device.h"
+#include "palpa/io/escape.h"
 #include "palpa/palpad/config.h"
 
 namespace palpa::palpad {
@@ -66,7 +67,7 @@ std::expected<double, std::string> ParseNumber(std::string_view name, std::strin
   const char* end = text.data() + text.size();
   const auto [ptr, ec] = std::from_chars(text.data(), end, v);
   if (text.empty() || ec != std::errc() || ptr != end || !std::isfinite(v))
-    return std::unexpected(std::string(name) + ": '" + std::string(text) + "' is not a finite number");
+    return std::unexpected(std::string(name) + ": '" + io::Escape(text) + "' is not a finite number");
   return v;
 }
 
@@ -88,7 +89,7 @@ std::expected<void, std::string> ApplyConfig(const std::string& path, Options& o
     const std::string where = path + ":" + std::to_string(e.line) + ": key '" + e.key + "'";
     const std::size_t spec = FindSpec("--" + e.key);
     if (spec == kSpecCount || e.key == "config")
-      return std::unexpected(path + ":" + std::to_string(e.line) + ": unknown key '" + e.key +
+      return std::unexpected(path + ":" + std::to_string(e.line) + ": unknown key '" + io::Escape(e.key) +
                              "' (keys are palpad's options without the leading --)");
     const OptionSpec& opt = kSpecs[spec];
     from_config[spec] = true;

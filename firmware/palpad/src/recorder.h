@@ -23,6 +23,7 @@
 #include <string>
 #include <utility>
 
+#include "palpa/io/file_safety.h"
 #include "palpa/rt/temp_registry.h"
 #include "palpa/servo/telemetry_drain.h"
 #include "palpa/trace/trace.h"
@@ -108,6 +109,7 @@ class Recorder final : public servo::TelemetrySink {
     int slot = -1;  // rt::RegisterTempPath slot of `temp`
     std::string Open(const std::string& p) {
       path = p;
+      if (auto ok = io::CheckOutputTarget(p); !ok) return ok.error().message;  // never over a device (issue 18)
       temp = p + ".tmp.XXXXXX";
       const int fd = mkstemp(temp.data());
       if (fd < 0) return "cannot create a temporary file for " + p + ": " + std::strerror(errno);

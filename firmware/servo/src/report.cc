@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "palpa/io/file_safety.h"
+
 namespace palpa::servo {
 namespace {
 
@@ -58,6 +60,8 @@ bool WriteCsv(std::FILE* out, std::span<const LogRow> rows) {
 }
 
 std::expected<AtomicFile, std::string> AtomicFile::Create(const std::string& path) {
+  // rename() replaces any node: a device, FIFO or directory is never a target (issue 18).
+  if (auto ok = io::CheckOutputTarget(path); !ok) return std::unexpected(std::move(ok.error().message));
   std::string temp = path + ".tmp.XXXXXX";
   const int fd = mkstemp(temp.data());
   if (fd < 0) return std::unexpected(ErrnoMessage("cannot create a temporary file for", path));

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <ctime>
 
+#include "palpa/io/file_safety.h"
 #include "palpa/rt/temp_registry.h"
 #include "palpa/servo/report.h"
 
@@ -114,6 +115,8 @@ std::string TelemetryDrain::StatusJson(const char* state) const {
 bool TelemetryDrain::WriteStatus(const char* state) {
   if (config_.status_path.empty()) return true;
   const std::string json = StatusJson(state);
+  // Re-checked on every write: rename() would replace a device or FIFO put there meanwhile.
+  if (!io::CheckOutputTarget(config_.status_path)) return false;
   const std::string temp = config_.status_path + ".tmp";
   // Registered while it exists, so that a fatal signal between fopen and rename removes it.
   const int slot = rt::RegisterTempPath(temp.c_str());

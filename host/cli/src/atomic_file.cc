@@ -9,9 +9,24 @@
 #include <filesystem>
 #include <vector>
 
+#include <fmt/core.h>
+
+#include "commands.h"
+#include "palpa/io/file_safety.h"
+
 namespace palpa::cli {
 
-std::expected<void, std::string> WriteFileAtomically(const std::string& path, std::span<const std::byte> bytes) {
+int CheckOutput(const char* command, const std::string& path, const std::vector<std::string>& inputs) {
+  auto ok = io::CheckOutputTarget(path, inputs);
+  if (ok) return kExitOk;
+  fmt::print(stderr, "palpa {}: {}\n", command, ok.error().message);
+  return ok.error().fault == io::Fault::kBadInput ? kExitBadInput : kExitIo;
+}
+
+std::expected<void, std::string> WriteFileAtomically(const std::string& path, std::span<const std::byte> bytes,
+                                                     const std::vector<std::string>& inputs) {
+  // Checked again here (not only by CheckOutput before the work): rename replaces any node.
+  if (auto ok = io::CheckOutputTarget(path, inputs); !ok) return std::unexpected(std::move(ok.error().message));
   const std::filesystem::path target(path);
   const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
   std::string leaf = ".";  // built by appends: GCC 12 -O3 warns (-Wrestrict) on operator+ chains here

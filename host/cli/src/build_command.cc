@@ -84,6 +84,8 @@ int RunBuild(const BuildArgs& args) {
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                     static_cast<std::size_t>(args.threads));
 
+  // Before any work: a build can take minutes, and its target must not be a device or the input.
+  if (const int refused = CheckOutput("build", args.output, {args.points}); refused != kExitOk) return refused;
   // Degenerate samples are dropped here, after reading, and named (issue 20): a real scan with a
   // few zero normals must not be refused whole. --strict refuses them.
   auto points = field::ReadPoints(args.points, field::ReadOptions{.keep_bad_normals = true});
@@ -215,7 +217,7 @@ int RunBuild(const BuildArgs& args) {
     header.crc32c = Crc32cFast(bytes.subspan(blob::kHeaderSize), Crc32cFast(bytes.first(blob::kCrcOffset), 0));
     std::memcpy(blob_words.get(), &header, sizeof header);
   }
-  if (auto w = WriteFileAtomically(args.output, bytes); !w) {
+  if (auto w = WriteFileAtomically(args.output, bytes, {args.points}); !w) {
     fmt::print(stderr, "palpa build: {}\n", w.error());
     return kExitIo;
   }

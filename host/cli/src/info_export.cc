@@ -93,6 +93,7 @@ int RunInfo(const std::string& path, bool json) {
 }
 
 int RunExport(const std::string& path, const std::string& npy) {
+  if (const int refused = CheckOutput("export", npy, {path}); refused != kExitOk) return refused;
   auto loaded = Load(path, "export");
   if (!loaded) return kExitBadInput;
   const blob::FieldView& v = loaded->second;
@@ -121,7 +122,7 @@ int RunExport(const std::string& path, const std::string& npy) {
     const float metres = static_cast<float>(static_cast<double>(q16[n]) / 65536.0 * v.voxel_m);
     std::memcpy(data + 4 * n, &metres, 4);
   }
-  if (auto w = WriteFileAtomically(npy, out); !w) {
+  if (auto w = WriteFileAtomically(npy, out, {path}); !w) {
     fmt::print(stderr, "palpa export: {}\n", w.error());
     return kExitIo;
   }

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "commands.h"
+#include "palpa/io/escape.h"
 
 int main(int argc, char** argv) {
   using namespace palpa::cli;
@@ -277,14 +278,16 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);
-    return code == 0 ? 0 : kExitBadInput;
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help
+    // CLI11 quotes the offending argument as given: escaped and cut here (issue 18, finding 8).
+    fmt::print(stderr, "{}\nRun with --help for more information.\n", palpa::io::Escape(e.what(), 512));
+    return kExitBadInput;
   }
 
   if (*build) {
     if (!offset.empty()) {
       if (std::sscanf(offset.c_str(), "%lf,%lf,%lf", &b.offset_m[0], &b.offset_m[1], &b.offset_m[2]) != 3) {
-        fmt::print(stderr, "palpa build: --offset expects x,y,z in metres, got '{}'\n", offset);
+        fmt::print(stderr, "palpa build: --offset expects x,y,z in metres, got '{}'\n", palpa::io::Escape(offset));
         return kExitBadInput;
       }
     }

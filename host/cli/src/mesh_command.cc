@@ -13,6 +13,7 @@
 namespace palpa::cli {
 
 int RunMesh(const MeshArgs& args) {
+  if (const int refused = CheckOutput("mesh", args.output, {args.field}); refused != kExitOk) return refused;
   std::string ext = std::filesystem::path(args.output).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
@@ -32,10 +33,10 @@ int RunMesh(const MeshArgs& args) {
   }
   std::expected<void, std::string> written;
   if (ext == ".ply") {
-    written = WriteFileAtomically(args.output, mesh::ToPly(*surface));
+    written = WriteFileAtomically(args.output, mesh::ToPly(*surface), {args.field});
   } else {
     const std::string text = mesh::ToObj(*surface);
-    written = WriteFileAtomically(args.output, std::as_bytes(std::span(text)));
+    written = WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {args.field});
   }
   if (!written) {
     fmt::print(stderr, "palpa mesh: {}\n", written.error());

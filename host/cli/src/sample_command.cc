@@ -10,6 +10,7 @@
 namespace palpa::cli {
 
 int RunSample(const SampleArgs& args) {
+  if (const int refused = CheckOutput("sample", args.output, {args.mesh}); refused != kExitOk) return refused;
   bool flipped = false;
   auto mesh = mesh::ReadClosedMesh(args.mesh, &flipped);
   if (!mesh) {
@@ -22,7 +23,7 @@ int RunSample(const SampleArgs& args) {
     return kExitBadInput;
   }
   const std::string text = mesh::ToXyzText(*points);
-  if (auto w = WriteFileAtomically(args.output, std::as_bytes(std::span(text))); !w) {
+  if (auto w = WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {args.mesh}); !w) {
     fmt::print(stderr, "palpa sample: {}\n", w.error());
     return kExitIo;
   }

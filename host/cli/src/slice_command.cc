@@ -9,6 +9,7 @@
 namespace palpa::cli {
 
 int RunSlice(const SliceArgs& args) {
+  if (const int refused = CheckOutput("slice", args.output, {args.field}); refused != kExitOk) return refused;
   auto field = mesh::LoadField(args.field);
   if (!field) {
     fmt::print(stderr, "palpa slice: {}\n", field.error().message);
@@ -20,7 +21,7 @@ int RunSlice(const SliceArgs& args) {
     fmt::print(stderr, "palpa slice: {}: {}\n", args.field, image.error().message);
     return kExitBadInput;
   }
-  if (auto w = WriteFileAtomically(args.output, mesh::EncodePng(*image)); !w) {
+  if (auto w = WriteFileAtomically(args.output, mesh::EncodePng(*image), {args.field}); !w) {
     fmt::print(stderr, "palpa slice: {}\n", w.error());
     return kExitIo;
   }

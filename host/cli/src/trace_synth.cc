@@ -569,6 +569,7 @@ class Synth {
 }  // namespace
 
 int RunTraceSynth(const TraceSynthArgs& a) {
+  if (const int refused = CheckOutput("trace synth", a.output, {a.field}); refused != kExitOk) return refused;
   auto bytes = blob::ReadFile(a.field.c_str());
   if (!bytes) {
     fmt::print(stderr, "palpa trace synth: {}\n", bytes.error().what());
@@ -628,7 +629,7 @@ int RunTraceSynth(const TraceSynthArgs& a) {
   } else {
     out = trace::FormatTrace(samples, comment);
   }
-  if (auto w = WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size()))); !w) {
+  if (auto w = WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size())), {a.field}); !w) {
     fmt::print(stderr, "palpa trace synth: {}\n", w.error());
     return kExitIo;
   }

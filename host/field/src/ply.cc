@@ -10,6 +10,8 @@
 
 #include <fmt/format.h>
 
+#include "palpa/io/escape.h"
+
 #include <array>
 #include <bit>
 #include <charconv>
@@ -132,8 +134,8 @@ double Decode(const unsigned char* p, Type t, bool big) {
   return 0;
 }
 
-// The body's values, one at a time: ascii tokens (tracking lines) or binary values (tracking the
-// byte offset). Next* return false with `error` set.
+// The body's values, one at a time: ascii tokens (one element per line, tracking lines) or binary
+// values (tracking the byte offset). Next* return false with `error` set.
 class Body {
  public:
   Body(std::string_view name, std::string_view text, std::size_t offset, std::size_t line, Format format)
@@ -144,14 +146,25 @@ class Body {
     return format_ == Format::kAscii ? fmt::format("{}:{}", name_, line_) : fmt::format("{}: byte {}", name_, pos_);
   }
 
-  // Ascii: moves to the next token, so that Where() names its line.
-  void Skip() {
+  // Ascii: moves to the next non-blank line, where an element's values start.
+  void BeginLine() {
     if (format_ != Format::kAscii) return;
-    while (pos_ < text_.size() &&
-           (text_[pos_] == ' ' || text_[pos_] == '\t' || text_[pos_] == '\r' || text_[pos_] == '\n')) {
+    while (pos_ < text_.size() && IsBlank(text_[pos_], true)) {
       if (text_[pos_] == '\n') ++line_;
       ++pos_;
     }
+    line_start_ = pos_;
+    values_read_ = 0;
+  }
+
+  // Ascii: the element's values must end its line. False (with `error`) if more follow.
+  bool EndLine(const std::string& what) {
+    if (format_ != Format::kAscii) return true;
+    SkipInLine();
+    if (pos_ == text_.size() || text_[pos_] == '\n') return true;
+    error = fmt::format("{}: {} has more values than the header's properties ({} on the line, {} expected)", Where(),
+                        what, ValuesOnLine(), values_read_);
+    return false;
   }
 
   bool Next(Type t, const char* what, double& value) {
@@ -165,14 +178,18 @@ class Body {
       pos_ += Size(t);
       return true;
     }
-    Skip();
-    if (pos_ == text_.size()) {
+    SkipInLine();
+    if (pos_ == text_.size() && line_start_ == text_.size()) {
       error = fmt::format("{}: the file ends before {}", Where(), what);
       return false;
     }
+    if (pos_ == text_.size() || text_[pos_] == '\n') {
+      error = fmt::format("{}: the line ends before {} ({} values on the line, more expected)", Where(), what,
+                          ValuesOnLine());
+      return false;
+    }
     std::size_t end = pos_;
-    while (end < text_.size() && text_[end] != ' ' && text_[end] != '\t' && text_[end] != '\r' && text_[end] != '\n')
-      ++end;
+    while (end < text_.size() && !IsBlank(text_[end], true)) ++end;
     std::string_view token = text_.substr(pos_, end - pos_);
     if (token.size() > 1 && token.front() == '+') token.remove_prefix(1);
     bool ok = false;
@@ -186,21 +203,39 @@ class Body {
       ok = ec == std::errc() && ptr == token.data() + token.size();
     }
     if (!ok) {
-      error = fmt::format("{}: '{}' is not a valid {} for {}", Where(), text_.substr(pos_, end - pos_),
+      error = fmt::format("{}: '{}' is not a valid {} for {}", Where(), io::Escape(text_.substr(pos_, end - pos_)),
                           IsInteger(t) ? "integer" : "number", what);
       return false;
     }
     pos_ = end;
+    ++values_read_;
     return true;
   }
 
   std::string error;
 
  private:
+  static bool IsBlank(char c, bool newline) { return c == ' ' || c == '\t' || c == '\r' || (newline && c == '\n'); }
+  void SkipInLine() {
+    while (pos_ < text_.size() && IsBlank(text_[pos_], false)) ++pos_;
+  }
+  // Whitespace-separated values on the current line, for messages.
+  std::size_t ValuesOnLine() const {
+    std::size_t end = text_.find('\n', line_start_);
+    if (end == std::string_view::npos) end = text_.size();
+    std::size_t count = 0;
+    for (std::size_t i = line_start_; i < end; ++i) {
+      if (!IsBlank(text_[i], false) && (i == line_start_ || IsBlank(text_[i - 1], false))) ++count;
+    }
+    return count;
+  }
+
   std::string_view name_;
   std::string_view text_;
   std::size_t pos_;
   std::size_t line_;
+  std::size_t line_start_ = 0;
+  std::size_t values_read_ = 0;
   Format format_;
 };
 
@@ -234,7 +269,7 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
   while (pos < text.size() && !ended) {
     ++line_number;
     const std::size_t eol = text.find('\n', pos);
-    if (eol == std::string_view::npos) break;
+    if (eol == std::string_view::npos || eol >= kMaxPlyHeaderBytes) break;
     const std::string_view line = text.substr(pos, eol - pos);
     pos = eol + 1;
     const std::vector<std::string_view> w = Words(line);
@@ -254,15 +289,17 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
       } else if (w[1] == "binary_big_endian") {
         format = Format::kBig;
       } else {
-        return fail(
-            fmt::format("{}: unknown format '{}' (ascii, binary_little_endian or binary_big_endian)", here, w[1]));
+        return fail(fmt::format("{}: unknown format '{}' (ascii, binary_little_endian or binary_big_endian)", here,
+                                io::Escape(w[1])));
       }
     } else if (w[0] == "element") {
       std::uint64_t count = 0;
-      if (w.size() != 3 ||
-          std::from_chars(w[2].data(), w[2].data() + w[2].size(), count).ptr != w[2].data() + w[2].size()) {
-        return fail(fmt::format("{}: expected 'element <name> <count>'", here));
-      }
+      if (w.size() != 3) return fail(fmt::format("{}: expected 'element <name> <count>'", here));
+      const auto [end, ec] = std::from_chars(w[2].data(), w[2].data() + w[2].size(), count);
+      if (ec == std::errc::result_out_of_range)
+        return fail(fmt::format("{}: element count '{}' is not below 2^64", here, io::Escape(w[2])));
+      if (ec != std::errc() || end != w[2].data() + w[2].size())
+        return fail(fmt::format("{}: element count '{}' is not a count", here, io::Escape(w[2])));
       elements.push_back({std::string(w[1]), count, {}});
     } else if (w[0] == "property") {
       if (elements.empty()) return fail(fmt::format("{}: a property before any element", here));
@@ -270,12 +307,12 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
       if (w.size() == 5 && w[1] == "list") {
         const auto count_type = ParseType(w[2]), item_type = ParseType(w[3]);
         if (!count_type || !item_type || !IsInteger(*count_type)) {
-          return fail(fmt::format("{}: bad list property types '{} {}'", here, w[2], w[3]));
+          return fail(fmt::format("{}: bad list property types '{} {}'", here, io::Escape(w[2]), io::Escape(w[3])));
         }
         p = {std::string(w[4]), *item_type, true, *count_type};
       } else if (w.size() == 3) {
         const auto type = ParseType(w[1]);
-        if (!type) return fail(fmt::format("{}: unknown property type '{}'", here, w[1]));
+        if (!type) return fail(fmt::format("{}: unknown property type '{}'", here, io::Escape(w[1])));
         p = {std::string(w[2]), *type, false, Type::kU8};
       } else {
         return fail(fmt::format("{}: expected 'property <type> <name>' or 'property list <type> <type> <name>'", here));
@@ -284,9 +321,12 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
     } else if (w[0] == "end_header") {
       ended = true;
     } else {
-      return fail(fmt::format("{}: unknown header keyword '{}'", here, w[0]));
+      return fail(fmt::format("{}: unknown header keyword '{}'", here, io::Escape(w[0])));
     }
   }
+  if (!ended && pos < text.size() && text.size() >= kMaxPlyHeaderBytes)
+    return fail(
+        fmt::format("{}: the header has no 'end_header' line in its first {} KiB", name, kMaxPlyHeaderBytes / 1024));
   if (!ended) return fail(fmt::format("{}: the header has no 'end_header' line", name));
   if (!format) return fail(fmt::format("{}: the header has no 'format' line", name));
 
@@ -317,17 +357,36 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
 
   // Body: elements in header order; those before the vertices are read and dropped, those after
   // are not needed.
+  // A count far beyond what the rest of the file can hold (an ascii element takes at least two bytes
+  // per property, a digit and a separator; a binary one its scalar sizes) is refused before any
+  // value is read; a file merely cut short is reported where it ends, below.
+  std::uint64_t body_bytes = text.size() - pos;
+  for (std::size_t e = 0; e <= vertex; ++e) {
+    const Element& element = elements[e];
+    std::uint64_t least = 0;
+    for (const Property& p : element.properties)
+      least += *format == Format::kAscii ? 2 : Size(p.list ? p.count_type : p.type);
+    if (least == 0) continue;
+    const std::uint64_t room = (body_bytes + 1) / least;
+    if (element.count / 2 > room) {
+      return fail(fmt::format("{}: the header declares {} '{}' elements, but the {} bytes after it hold at most {}",
+                              name, element.count, io::Escape(element.name), body_bytes, room));
+    }
+    body_bytes -= std::min(body_bytes, element.count * least);
+  }
+
   Body body(name, text, pos, line_number + 1, *format);
   for (std::size_t e = 0; e <= vertex; ++e) {
     const Element& element = elements[e];
     if (element.properties.empty()) continue;  // takes no bytes, whatever its count
     std::vector<double> values(element.properties.size());
     for (std::uint64_t n = 0; n < element.count; ++n) {
-      body.Skip();
+      body.BeginLine();
       const std::string where = body.Where();
+      const std::string which = fmt::format("{} {} of {}", io::Escape(element.name), n, element.count);
       for (std::size_t i = 0; i < element.properties.size(); ++i) {
         const Property& p = element.properties[i];
-        const std::string what = fmt::format("{} {} of {} '{}'", element.name, n, element.count, p.name);
+        const std::string what = fmt::format("{} '{}'", which, io::Escape(p.name));
         if (!p.list) {
           if (!body.Next(p.type, what.c_str(), values[i])) return fail(body.error);
           continue;
@@ -339,6 +398,7 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
           if (!body.Next(p.type, what.c_str(), item)) return fail(body.error);
         }
       }
+      if (!body.EndLine(which)) return fail(body.error);
       if (e != vertex) continue;
       const Eigen::Vector3d position(values[slot[0]], values[slot[1]], values[slot[2]]);
       const Eigen::Vector3d normal(values[slot[3]], values[slot[4]], values[slot[5]]);

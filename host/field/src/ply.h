@@ -1,6 +1,7 @@
 // Internal: the PLY reader behind ReadPoints (palpa/field/point_io.h).
 #pragma once
 
+#include <cstddef>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -10,6 +11,10 @@
 #include "palpa/field/point_io.h"
 
 namespace palpa::field::detail {
+
+/// The PLY header must end ("end_header") within this many bytes: a file without one is refused
+/// after reading only this much.
+inline constexpr std::size_t kMaxPlyHeaderBytes = 64 * 1024;
 
 /// Validates one oriented point and appends it (normal normalised), or says what is wrong with it.
 using AddPoint = std::optional<std::string> (*)(PointSet& points, const Eigen::Vector3d& position,

@@ -2,7 +2,10 @@
 
 #include "ply.h"
 
+#include <unistd.h>
+
 #include <fmt/format.h>
+
 #include <array>
 #include <cctype>
 #include <cerrno>
@@ -15,6 +18,8 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include "palpa/io/escape.h"
+#include "palpa/io/file_safety.h"
 
 namespace palpa::field {
 namespace {
@@ -37,10 +42,19 @@ bool ParseNumber(std::string_view token, double& value) {
   return ec == std::errc() && ptr == end;
 }
 
+// The longest .xyz line read: six doubles need at most ~150 bytes; room for comments.
+constexpr std::size_t kMaxLineBytes = 4096;
+// PLY: the header must end within this many bytes, and the whole file may be at most this large
+// (it is read into memory; 1 GiB is 44 million float vertices with normals).
+constexpr std::size_t kMaxPlyHeaderBytes = detail::kMaxPlyHeaderBytes;
+constexpr std::uint64_t kMaxPlyBytes = std::uint64_t{1} << 30;
+
+std::string Quoted(const std::string& name) { return io::Escape(name, 256); }
+
 std::expected<PointSet, Error> AtLeastFour(const std::string& name, PointSet points) {
   if (points.positions.size() < kMinPoints) {
     return std::unexpected(
-        Error{fmt::format("{}: {} points; at least {} are needed", name, points.positions.size(), kMinPoints)});
+        Error{fmt::format("{}: {} points; at least {} are needed", Quoted(name), points.positions.size(), kMinPoints)});
   }
   return points;
 }
@@ -55,6 +69,45 @@ std::optional<std::string> AddPointKeepingBadNormal(PointSet& points, const Eige
   return std::nullopt;
 }
 
+// A PLY file: the header is looked for in the first kMaxPlyHeaderBytes (so a file without one is
+// refused after reading that much), then the whole file is read within kMaxPlyBytes.
+std::expected<PointSet, Error> ReadPlyFile(const std::string& name, const detail::AddPoint& add) {
+  std::uint64_t size = 0;
+  auto fd = io::OpenRegular(name, "point file", &size);
+  if (!fd) return std::unexpected(Error{std::move(fd.error().message)});
+  if (size > kMaxPlyBytes) {
+    ::close(*fd);
+    return std::unexpected(Error{fmt::format("{}: the PLY file holds {} bytes; at most {} are read", Quoted(name), size,
+                                             io::FormatBytes(kMaxPlyBytes))});
+  }
+  std::string text(static_cast<std::size_t>(std::min<std::uint64_t>(size, kMaxPlyHeaderBytes)), '\0');
+  std::size_t got = 0;
+  bool failed = false;
+  int read_errno = 0;
+  const auto read_to = [&](std::size_t want) {
+    text.resize(want);
+    while (got < want) {
+      const ssize_t n = ::read(*fd, text.data() + got, want - got);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        failed = n < 0;
+        read_errno = errno;
+        break;
+      }
+      got += static_cast<std::size_t>(n);
+    }
+    text.resize(got);
+  };
+  read_to(text.size());
+  const bool header_ends = text.starts_with("ply") && (text.find("\nend_header") != std::string::npos);
+  if (header_ends && !failed) read_to(static_cast<std::size_t>(size));  // else: ReadPly names the header's fault
+  ::close(*fd);
+  if (failed) return std::unexpected(Error{fmt::format("{}: read error: {}", Quoted(name), std::strerror(read_errno))});
+  PointSet points;
+  if (auto error = detail::ReadPly(Quoted(name), text, add, points)) return std::unexpected(Error{std::move(*error)});
+  return AtLeastFour(name, std::move(points));
+}
+
 }  // namespace
 
 std::string PointPlace(const std::string& file, const PointSet& points, std::size_t index) {
@@ -66,36 +119,30 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, con
   const std::string name = path.string();
   const std::string ext = Lower(path.extension().string());
   if (ext != ".xyz" && ext != ".pwn" && ext != ".ply") {
-    return std::unexpected(Error{
-        fmt::format("{}: unknown extension '{}' (expected .xyz, .pwn or .ply)", name, path.extension().string())});
+    return std::unexpected(Error{fmt::format("{}: unknown extension '{}' (expected .xyz, .pwn or .ply)", Quoted(name),
+                                             io::Escape(path.extension().string()))});
   }
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) {
-    return std::unexpected(Error{fmt::format("{}: is a directory, not a point file", name)});
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return std::unexpected(Error{fmt::format("{}: cannot open file: {}", name, std::strerror(errno))});
-  }
-  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  if (in.bad()) {
-    return std::unexpected(Error{fmt::format("{}: read error", name)});
-  }
-  if (ext == ".ply") {
-    PointSet points;
-    const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
-    if (auto error = detail::ReadPly(name, text, add, points)) return std::unexpected(Error{std::move(*error)});
-    return AtLeastFour(name, std::move(points));
-  }
+  const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
+  if (ext == ".ply") return ReadPlyFile(name, add);
 
+  // Streamed line by line: memory is bounded by the points, not by what the file holds.
+  auto reader = io::LineReader::Open(name, kMaxLineBytes, "point file");
+  if (!reader) return std::unexpected(Error{std::move(reader.error().message)});
   PointSet points;
-  std::string_view rest = text;
-  std::size_t line_number = 0;
-  while (!rest.empty()) {
-    ++line_number;
-    const std::size_t eol = rest.find('\n');
-    std::string_view line = rest.substr(0, eol);
-    rest = eol == std::string_view::npos ? std::string_view{} : rest.substr(eol + 1);
+  while (true) {
+    std::string_view line;
+    const io::LineReader::Status status = reader->Next(line);
+    if (status == io::LineReader::Status::kEnd) break;
+    const std::uint64_t line_number = reader->line_number();
+    if (status == io::LineReader::Status::kTooLong) {
+      return std::unexpected(
+          Error{fmt::format("{}:{}: the line is longer than {} bytes (a point is one line of six "
+                            "numbers)",
+                            Quoted(name), line_number, kMaxLineBytes)});
+    }
+    if (status == io::LineReader::Status::kError) {
+      return std::unexpected(Error{fmt::format("{}: read error: {}", Quoted(name), std::strerror(reader->error()))});
+    }
     if (const std::size_t hash = line.find('#'); hash != std::string_view::npos) {
       line = line.substr(0, hash);
     }
@@ -111,7 +158,8 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, con
       const std::string_view token = line.substr(pos, end - pos);
       double value = 0.0;
       if (!ParseNumber(token, value)) {
-        return std::unexpected(Error{fmt::format("{}:{}: '{}' is not a number", name, line_number, token)});
+        return std::unexpected(
+            Error{fmt::format("{}:{}: '{}' is not a number", Quoted(name), line_number, io::Escape(token))});
       }
       if (count < kNumbersPerLine) values[static_cast<std::size_t>(count)] = value;
       ++count;
@@ -119,16 +167,15 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, con
     }
     if (count == 0) continue;  // blank or comment-only line
     if (count != kNumbersPerLine) {
-      return std::unexpected(
-          Error{fmt::format("{}:{}: expected {} numbers, found {}", name, line_number, kNumbersPerLine, count)});
+      return std::unexpected(Error{
+          fmt::format("{}:{}: expected {} numbers, found {}", Quoted(name), line_number, kNumbersPerLine, count)});
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
     const Eigen::Vector3d n(values[3], values[4], values[5]);
-    const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
     if (auto bad = add(points, p, n)) {
-      return std::unexpected(Error{fmt::format("{}:{}: {}", name, line_number, *bad)});
+      return std::unexpected(Error{fmt::format("{}:{}: {}", Quoted(name), line_number, *bad)});
     }
-    if (options.keep_bad_normals) points.lines.push_back(line_number);
+    if (options.keep_bad_normals) points.lines.push_back(static_cast<std::size_t>(line_number));
   }
   return AtLeastFour(name, std::move(points));
 }

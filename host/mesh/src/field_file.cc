@@ -9,6 +9,8 @@ std::expected<LoadedField, Error> LoadField(const std::string& path, blob::Load 
   out.bytes = std::move(*bytes);
   auto view = blob::Verify(out.bytes);
   if (!view) return std::unexpected(Error{path + ": " + view.error().what()});
+  out.file_crc32c = view->crc32c;
+  out.file_bytes = out.bytes.size();
   if (load == blob::Load::kDense && view->version == blob::kVersion2) {
     out.bytes = blob::DenseV1(*view);
     view = blob::Verify(out.bytes);

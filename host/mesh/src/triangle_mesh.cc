@@ -4,11 +4,15 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <string_view>
 #include <utility>
 
 #include <fmt/core.h>
+
+#include "palpa/io/escape.h"
+#include "palpa/io/file_safety.h"
 
 namespace palpa::mesh {
 namespace {
@@ -36,23 +40,31 @@ bool Parse(std::string_view token, T& value) {
   return ec == std::errc() && ptr == last;
 }
 
-// Reads the file line by line, handing out only lines that hold tokens.
+// Reads the file line by line (bounded: io::LineReader), handing out only lines that hold tokens.
+// False at the end, or with error() set for a line too long or a read error.
 class LineReader {
  public:
-  explicit LineReader(std::ifstream& in) : in_(in) {}
+  explicit LineReader(io::LineReader& in) : in_(in) {}
   bool Next(std::vector<std::string_view>& tokens) {
-    while (std::getline(in_, text_)) {
-      ++line_;
-      tokens = Tokens(text_);
+    std::string_view text;
+    while (true) {
+      const io::LineReader::Status status = in_.Next(text);
+      line_ = static_cast<int>(in_.line_number());
+      if (status == io::LineReader::Status::kTooLong)
+        error_ = fmt::format("the line is longer than {} bytes", kMaxLine);
+      if (status == io::LineReader::Status::kError) error_ = fmt::format("read error: {}", std::strerror(in_.error()));
+      if (status != io::LineReader::Status::kLine) return false;
+      tokens = Tokens(text);
       if (!tokens.empty()) return true;
     }
-    return false;
   }
   int line() const { return line_; }
+  const std::string& error() const { return error_; }
+  static constexpr std::size_t kMaxLine = 4096;
 
  private:
-  std::ifstream& in_;
-  std::string text_;
+  io::LineReader& in_;
+  std::string error_;
   int line_ = 0;
 };
 
@@ -63,18 +75,22 @@ std::uint64_t EdgeKey(int a, int b) {
 }  // namespace
 
 std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
-  const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) return std::unexpected(Error{file + ": cannot open for reading"});
-  LineReader reader(in);
+  const std::string file = io::Escape(path.string(), 256);
+  auto in = io::LineReader::Open(path.string(), LineReader::kMaxLine, "mesh file");
+  if (!in) return std::unexpected(Error{std::move(in.error().message)});
+  LineReader reader(*in);
   auto fail = [&](const std::string& what) {
-    return std::unexpected(Error{fmt::format("{}:{}: {}", file, reader.line(), what)});
+    return std::unexpected(
+        Error{fmt::format("{}:{}: {}", file, reader.line(), reader.error().empty() ? what : reader.error())});
   };
 
   std::vector<std::string_view> t;
-  if (!reader.Next(t)) return std::unexpected(Error{file + ": empty file, expected an OFF header"});
+  if (!reader.Next(t)) {
+    if (!reader.error().empty()) return fail("");
+    return std::unexpected(Error{file + ": empty file, expected an OFF header"});
+  }
   // The header is `OFF`, optionally followed by the counts on the same line.
-  if (t[0] != "OFF") return fail(fmt::format("expected the 'OFF' header, found '{}'", t[0]));
+  if (t[0] != "OFF") return fail(fmt::format("expected the 'OFF' header, found '{}'", io::Escape(t[0])));
   t.erase(t.begin());
   if (t.empty() && !reader.Next(t)) return fail("expected the counts line 'vertices faces edges'");
   if (t.size() < 2 || t.size() > 3) return fail("expected the counts line 'vertices faces edges'");
@@ -86,33 +102,37 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
   if (nv > kMaxCount || nf > kMaxCount) return fail("more than 2^28 vertices or faces");
 
   TriangleMesh mesh;
-  mesh.vertices.reserve(static_cast<std::size_t>(nv));
+  // Reserved only as far as the file can hold (a vertex line takes at least 6 bytes, "0 0 0\n"; a
+  // face 8): a header's counts alone never allocate gigabytes for a small file.
+  const std::uint64_t size = in->size();
+  mesh.vertices.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(static_cast<std::uint64_t>(nv), size / 6)));
   for (long long v = 0; v < nv; ++v) {
     if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} vertices", v, nv));
     if (t.size() < 3) return fail(fmt::format("vertex {} needs 3 coordinates, found {}", v, t.size()));
     Eigen::Vector3d p;
     for (int a = 0; a < 3; ++a) {
       const auto token = t[static_cast<std::size_t>(a)];
-      if (!Parse(token, p[a])) return fail(fmt::format("'{}' is not a number", token));
+      if (!Parse(token, p[a])) return fail(fmt::format("'{}' is not a number", io::Escape(token)));
       if (!std::isfinite(p[a])) return fail(fmt::format("vertex {} has a non-finite coordinate", v));
     }
     mesh.vertices.push_back(p);
   }
-  mesh.faces.reserve(static_cast<std::size_t>(nf));
-  mesh.face_lines.reserve(static_cast<std::size_t>(nf));
+  const auto faces = static_cast<std::size_t>(std::min<std::uint64_t>(static_cast<std::uint64_t>(nf), size / 8));
+  mesh.faces.reserve(faces);
+  mesh.face_lines.reserve(faces);
   for (long long f = 0; f < nf; ++f) {
     if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} faces", f, nf));
     int n = 0;
-    if (!Parse(t[0], n)) return fail(fmt::format("'{}' is not a vertex count", t[0]));
+    if (!Parse(t[0], n)) return fail(fmt::format("'{}' is not a vertex count", io::Escape(t[0])));
     if (n != 3) return fail(fmt::format("face {} has {} vertices; palpa reads triangle meshes only", f, n));
     if (t.size() < 4) return fail(fmt::format("face {} lists {} of 3 vertex indices", f, t.size() - 1));
     std::array<int, 3> face{};
     for (int a = 0; a < 3; ++a) {
       const auto token = t[static_cast<std::size_t>(a + 1)];
       if (!Parse(token, face[static_cast<std::size_t>(a)]))
-        return fail(fmt::format("'{}' is not a vertex index", token));
+        return fail(fmt::format("'{}' is not a vertex index", io::Escape(token)));
       if (face[static_cast<std::size_t>(a)] < 0 || face[static_cast<std::size_t>(a)] >= nv)
-        return fail(fmt::format("vertex index {} is out of range [0, {})", token, nv));
+        return fail(fmt::format("vertex index {} is out of range [0, {})", io::Escape(token), nv));
     }
     if (face[0] == face[1] || face[1] == face[2] || face[0] == face[2])
       return fail(fmt::format("face {} repeats a vertex", f));
@@ -120,7 +140,7 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
     mesh.face_lines.push_back(reader.line());
   }
   if (reader.Next(t)) return fail("unexpected data after the last face");
-  if (in.bad()) return std::unexpected(Error{file + ": read error"});
+  if (!reader.error().empty()) return fail("");
   return mesh;
 }
 

@@ -5,10 +5,15 @@
 
 #include <httplib.h>
 
+#include <pthread.h>
+#include <sys/socket.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <mutex>
 
@@ -22,6 +27,83 @@ namespace {
 
 using Json = nlohmann::json;
 constexpr std::size_t kMaxPayloadBytes = 64 * 1024;
+
+// Connections: each gets its own thread, at most kMaxConnections at once (more wait in the kernel's
+// listen queue, kListenBacklog long, until one ends). httplib's own pool has max(8, cores − 1)
+// threads, and every idle connection held one for the keep-alive timeout: 500 idle connections
+// delayed a GET by 30-60 s. A connection without a request for kIdleSeconds is closed, as is a
+// request stalled kReadSeconds without a byte. One request per connection: httplib reads each
+// request through a fresh buffer, so the bytes of a pipelined second request were read and
+// dropped, and the client waited for an answer that never came; now the first answer says
+// "Connection: close" and the connection closes, which tells the client to send the rest again.
+constexpr std::size_t kMaxConnections = 1024;
+constexpr int kListenBacklog = 1024;                // httplib's 5 dropped SYNs (1 s client retries) under load
+constexpr std::size_t kThreadStackBytes = 1 << 20;  // handlers keep their data on the heap
+constexpr time_t kIdleSeconds = 5;
+constexpr time_t kReadSeconds = 5;
+
+// httplib::Server with the listen backlog raised after binding (httplib listens with 5).
+class Server : public httplib::Server {
+ public:
+  void RaiseBacklog(int backlog) {
+    if (svr_sock_ != INVALID_SOCKET) ::listen(svr_sock_, backlog);  // Linux updates the backlog in place
+  }
+};
+
+// httplib::TaskQueue with a thread per task (a connection), at most `max` running; enqueue waits
+// (so the accept loop stops accepting) while `max` run. shutdown waits for all of them.
+class ConnectionThreads : public httplib::TaskQueue {
+ public:
+  explicit ConnectionThreads(std::size_t max) : max_(max) {}
+  ~ConnectionThreads() override { shutdown(); }
+
+  void enqueue(std::function<void()> fn) override {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return running_ < max_; });
+    auto* task = new Task{this, std::move(fn)};
+    pthread_attr_t attr;
+    pthread_attr_init(&attr);
+    pthread_attr_setstacksize(&attr, kThreadStackBytes);
+    pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+    pthread_t thread;
+    const bool started = pthread_create(&thread, &attr, &Run, task) == 0;
+    pthread_attr_destroy(&attr);
+    if (started) {
+      ++running_;
+      return;
+    }
+    // No thread to be had: serve it on this one (the accept loop waits meanwhile).
+    lock.unlock();
+    task->fn();
+    delete task;
+  }
+
+  void shutdown() override {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return running_ == 0; });
+  }
+
+ private:
+  struct Task {
+    ConnectionThreads* owner;
+    std::function<void()> fn;
+  };
+  static void* Run(void* arg) {
+    auto* task = static_cast<Task*>(arg);
+    task->fn();
+    ConnectionThreads* owner = task->owner;
+    delete task;
+    std::lock_guard lock(owner->mutex_);
+    --owner->running_;
+    owner->changed_.notify_all();
+    return nullptr;
+  }
+
+  const std::size_t max_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::size_t running_ = 0;
+};
 
 using blob::MethodName;
 
@@ -41,8 +123,9 @@ std::string InfoJson(const ViewContent& c) {
   j["band_voxels"] = f.band_voxels;
   j["method"] = MethodName(f.method);
   j["point_count"] = f.point_count;
-  j["crc32c"] = fmt::format("{:08x}", f.crc32c);
-  j["blob_bytes"] = c.field.bytes.size();
+  // The file's, as palpad reports them for the field it renders (not the dense copy's of a v2 blob).
+  j["crc32c"] = fmt::format("{:08x}", c.field.file_crc32c);
+  j["blob_bytes"] = c.field.file_bytes;
   // The bounding box as the page will see it: of the float32 positions /api/mesh sends.
   std::array<float, 3> lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
                           std::numeric_limits<float>::infinity()};
@@ -103,7 +186,7 @@ struct ViewServer::Impl {
   std::string mesh_bytes;
   std::string trace_json;
   std::mutex slice_mutex;  // one slice render at a time: bounds the CPU a client can take
-  httplib::Server server;
+  Server server;
 
   void Slice(const httplib::Request& req, httplib::Response& res) {
     const std::string axis = req.get_param_value("axis");
@@ -140,6 +223,15 @@ struct ViewServer::Impl {
     res.set_header("Content-Security-Policy",
                    "default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
                    "img-src 'self' blob: data:; connect-src 'self'");
+    if (req.ranges.size() > 1) {
+      // Several ranges would each be a copy of the body (100 ranges of the mesh: over 240 MB).
+      // The request object is httplib's own non-const local; clearing its ranges keeps httplib
+      // from applying them to this answer.
+      const_cast<httplib::Request&>(req).ranges.clear();
+      res.set_header("Connection", "close");
+      Text(res, 416, "one byte range per request");
+      return httplib::Server::HandlerResponse::Handled;
+    }
     if (req.method != "GET" && req.method != "HEAD") {
       res.set_header("Allow", "GET, HEAD");
       res.set_header("Connection", "close");
@@ -186,8 +278,11 @@ ViewServer::ViewServer(ViewContent content, AssetSet assets) : impl_(std::make_u
   if (m.content.trace) m.trace_json = TraceToJson(*m.content.trace);
 
   m.server.set_payload_max_length(kMaxPayloadBytes);
-  m.server.set_read_timeout(5, 0);
+  m.server.set_read_timeout(kReadSeconds, 0);
   m.server.set_write_timeout(5, 0);
+  m.server.set_keep_alive_timeout(kIdleSeconds);
+  m.server.set_keep_alive_max_count(1);
+  m.server.new_task_queue = [] { return new ConnectionThreads(kMaxConnections); };
   m.server.set_pre_routing_handler(
       [&m](const httplib::Request& req, httplib::Response& res) { return m.Route(req, res); });
   m.server.set_error_handler([](const httplib::Request&, httplib::Response& res) {
@@ -210,8 +305,12 @@ ViewServer::~ViewServer() = default;
 std::expected<int, Error> ViewServer::Bind(const std::string& host, int port) {
   if (port == 0) {
     const int bound = impl_->server.bind_to_any_port(host);
-    if (bound > 0) return bound;
+    if (bound > 0) {
+      impl_->server.RaiseBacklog(kListenBacklog);
+      return bound;
+    }
   } else if (impl_->server.bind_to_port(host, port)) {
+    impl_->server.RaiseBacklog(kListenBacklog);
     return port;
   }
   return std::unexpected(Error{

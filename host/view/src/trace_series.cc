@@ -12,6 +12,9 @@
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 
+#include "palpa/io/escape.h"
+#include "palpa/io/file_safety.h"
+
 namespace palpa::view {
 namespace {
 
@@ -23,21 +26,31 @@ std::expected<TraceSeries, Error> ReadTrace(const std::string& path) {
   std::string file = path;
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) file = (std::filesystem::path(path) / "out.csv").string();
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return std::unexpected(Error{fmt::format("{}: cannot read: {}", file, std::strerror(errno))});
+  // Bounded: a regular file only, read line by line (a palpad row is ~150 bytes).
+  auto in = io::LineReader::Open(file, 4096, "trace CSV");
+  if (!in) return std::unexpected(Error{std::move(in.error().message)});
   TraceSeries s;
   s.source = file;
+  file = io::Escape(file, 256);  // for messages
   std::string line;
-  int n = 0;
+  std::uint64_t n = 0;
   bool header = false;
-  while (std::getline(in, line)) {
-    ++n;
+  while (true) {
+    std::string_view text;
+    const io::LineReader::Status status = in->Next(text);
+    n = in->line_number();
+    if (status == io::LineReader::Status::kEnd) break;
+    if (status == io::LineReader::Status::kTooLong)
+      return std::unexpected(Error{fmt::format("{}:{}: the line is longer than 4096 bytes", file, n)});
+    if (status == io::LineReader::Status::kError)
+      return std::unexpected(Error{fmt::format("{}: read error: {}", file, std::strerror(in->error()))});
+    line.assign(text);
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
     if (!header) {
       if (line != kHeader)
-        return std::unexpected(
-            Error{fmt::format("{}:{}: expected palpad's CSV header '{}', got '{}'", file, n, kHeader, line)});
+        return std::unexpected(Error{
+            fmt::format("{}:{}: expected palpad's CSV header '{}', got '{}'", file, n, kHeader, io::Escape(line))});
       header = true;
       continue;
     }
@@ -51,7 +64,7 @@ std::expected<TraceSeries, Error> ReadTrace(const std::string& path) {
       const auto [ptr, err] = std::from_chars(p, stop, v[c]);
       if (err != std::errc{} || ptr != stop || !std::isfinite(v[c]))
         return std::unexpected(Error{fmt::format("{}:{}: field {} '{}' is not a finite number", file, n, c + 1,
-                                                 std::string(p, static_cast<std::size_t>(stop - p)))});
+                                                 io::Escape(std::string_view(p, static_cast<std::size_t>(stop - p))))});
       p = stop == end ? end : stop + 1;
     }
     if (v[10] != 0 && v[10] != 1)

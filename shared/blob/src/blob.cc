@@ -1,5 +1,7 @@
 #include "palpa/blob/blob.h"
 
+#include "palpa/io/file_safety.h"
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -209,16 +211,10 @@ std::vector<std::byte> DenseV1(const FieldView& v2) {
 }
 
 std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load) {
-  std::FILE* f = std::fopen(path, "rb");
-  if (f == nullptr) return Fail("file", 0, "cannot open %s: %s", path, std::strerror(errno));
-  std::vector<std::byte> data;
-  std::array<std::byte, 1 << 16> chunk;
-  std::size_t n = 0;
-  while ((n = std::fread(chunk.data(), 1, chunk.size(), f)) > 0)
-    data.insert(data.end(), chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(n));
-  const bool failed = std::ferror(f) != 0;
-  std::fclose(f);
-  if (failed) return Fail("file", data.size(), "read error in %s", path);
+  // A regular file within kMaxFileBytes (a FIFO or /dev/zero is refused before any read).
+  auto read = io::ReadBounded(path, kMaxFileBytes, "blob file");
+  if (!read) return Fail("file", 0, "%s", read.error().message.c_str());
+  std::vector<std::byte> data = std::move(*read);
   std::uint16_t version = 0;
   if (load == Load::kAsStored || data.size() < kHeaderSizeV2 ||
       std::memcmp(data.data(), kMagic.data(), kMagic.size()) != 0)

@@ -9,9 +9,12 @@
 #include <charconv>
 #include <cinttypes>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <string_view>
 #include <vector>
 
+#include "palpa/io/escape.h"
 #include "palpa/net/socket.h"
 
 namespace palpa::net {
@@ -206,12 +209,30 @@ std::expected<Key, NetError> ReadKeyFile(const std::string& path) {
   const auto fail = [&](const std::string& why) {
     return std::unexpected(Err(NetErrorCode::kKeyFile, path + ": " + why));
   };
-  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  // A symbolic link is refused (a key is read only where it was made), naming what it points to;
+  // O_NONBLOCK so that a FIFO is refused by fstat below instead of blocking the open for ever.
+  struct stat link {};
+  if (lstat(path.c_str(), &link) == 0 && S_ISLNK(link.st_mode)) {
+    char* resolved = realpath(path.c_str(), nullptr);
+    std::string target;
+    if (resolved != nullptr) {
+      target = io::Escape(resolved, 256);
+    } else {
+      char to[4096];
+      const ssize_t n = readlink(path.c_str(), to, sizeof to);
+      target =
+          io::Escape(std::string_view(to, n > 0 ? static_cast<std::size_t>(n) : 0), 256) + " (which does not resolve)";
+    }
+    std::free(resolved);
+    return fail("is a symbolic link to " + target +
+                "; key files are not read through links (name the key file itself: --key-file " + target + ")");
+  }
+  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
   if (fd < 0) return fail(std::string("cannot open key file: ") + std::strerror(errno));
   Socket closer(fd);  // an owned fd, closed on return
   struct stat st {};
   if (fstat(fd, &st) != 0) return fail(std::string("cannot stat key file: ") + std::strerror(errno));
-  if (!S_ISREG(st.st_mode)) return fail("not a regular file");
+  if (!S_ISREG(st.st_mode)) return fail("not a regular file (a key file must be one, made by palpa keygen)");
   if ((st.st_mode & 077) != 0) {
     char mode[8];
     std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(st.st_mode & 07777));

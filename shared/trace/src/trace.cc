@@ -9,6 +9,8 @@
 #include <limits>
 
 #include "palpa/blob/blob.h"
+#include "palpa/io/escape.h"
+#include "palpa/io/file_safety.h"
 
 namespace palpa::trace {
 namespace {
@@ -92,13 +94,13 @@ std::string ParseHeader(std::string_view line, TraceInfo& info) {
       continue;
     }
     const auto eq = word.find('=');
-    if (eq == std::string_view::npos) return "header word '" + std::string(word) + "' is not key=value";
+    if (eq == std::string_view::npos) return "header word '" + io::Escape(word) + "' is not key=value";
     const std::string_view key = word.substr(0, eq), value = word.substr(eq + 1);
     if (key == "units") {
-      if (value != "s,m") return "units must be s,m (seconds, metres), found '" + std::string(value) + "'";
+      if (value != "s,m") return "units must be s,m (seconds, metres), found '" + io::Escape(value) + "'";
       units = true;
     } else if (key == "frame") {
-      if (value != "device") return "frame must be device, found '" + std::string(value) + "'";
+      if (value != "device") return "frame must be device, found '" + io::Escape(value) + "'";
       frame = true;
     } else if (key == "columns") {
       if (value == kColumns4) {
@@ -107,11 +109,11 @@ std::string ParseHeader(std::string_view line, TraceInfo& info) {
         info.has_buttons = true;
       } else {
         return "columns must be " + std::string(kColumns4) + " or " + std::string(kColumns5) + ", found '" +
-               std::string(value) + "'";
+               io::Escape(value) + "'";
       }
       columns = true;
     } else {
-      return "unknown header key '" + std::string(key) + "'";
+      return "unknown header key '" + io::Escape(key) + "'";
     }
   }
   if (first) return "header line names no version";
@@ -310,11 +312,10 @@ std::expected<std::vector<TraceSample>, TraceError> ParseTrace(const std::string
 }
 
 std::expected<TraceFile, TraceError> ReadTraceFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return FailLine(path, 0, "cannot open trace file");
-  const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  if (in.bad()) return FailLine(path, 0, "cannot read trace file");
-  return ParseTraceBytes(std::as_bytes(std::span(bytes.data(), bytes.size())), path);
+  // A regular file within kMaxTraceFileBytes (a FIFO or /dev/zero is refused before any read).
+  auto bytes = io::ReadBounded(path, kMaxTraceFileBytes, "trace file");
+  if (!bytes) return std::unexpected(TraceError{0, 0, std::move(bytes.error().message)});
+  return ParseTraceBytes(*bytes, io::Escape(path, 256));
 }
 
 std::expected<std::vector<TraceSample>, TraceError> ReadTrace(const std::string& path) {

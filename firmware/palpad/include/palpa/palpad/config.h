@@ -23,7 +23,8 @@ struct ConfigEntry {
   int line = 0;          ///< 1-based line of the key
 };
 
-/// Reads and parses `path`; entries in file order (by line). Errors name the file and line, e.g.
+/// Reads and parses `path` (a regular file of at most 1 MiB: io::ReadBounded); entries in file
+/// order (by line). Errors name the file and line, e.g.
 /// "palpad.toml:3:7: expected '=' …" or "palpad.toml: cannot read: No such file or directory".
 std::expected<std::vector<ConfigEntry>, std::string> ReadConfigFile(const std::string& path);
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <expected>
 #include <string>
 #include <vector>
@@ -16,6 +17,10 @@ namespace palpa::mesh {
 struct LoadedField {
   std::vector<std::byte> bytes;
   blob::FieldView view;  ///< Load::kDense: a v2 file re-encoded by blob::DenseV1; else as stored
+  /// The file as stored (what palpad loads and reports), whatever `load` made of it: its header's
+  /// CRC-32C and its size in bytes.
+  std::uint32_t file_crc32c = 0;
+  std::size_t file_bytes = 0;
 
   LoadedField() = default;
   LoadedField(LoadedField&&) = default;

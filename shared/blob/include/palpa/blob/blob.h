@@ -259,8 +259,14 @@ enum class Load {
   kDense,     ///< a v2 blob is verified, then re-encoded by DenseV1 for the host tools that index φ
 };
 
-/// Reads a whole file into a buffer suitable for Verify (non-RT). Errors name the file; with
-/// Load::kDense also the v2 blob's field and byte.
+/// The largest blob file ReadFile reads: 4 GiB (1 GiB where size_t has 32 bits), above the
+/// largest field palpa builds (a dense 1000³ v1 blob is 3.7 GiB).
+inline constexpr std::uint64_t kMaxFileBytes =
+    sizeof(std::size_t) >= 8 ? std::uint64_t{4} << 30 : std::uint64_t{1} << 30;
+
+/// Reads a whole file into a buffer suitable for Verify (non-RT). Only a regular file of at most
+/// kMaxFileBytes is read (io::ReadBounded: a FIFO or device is refused at once). Errors name the
+/// file; with Load::kDense also the v2 blob's field and byte.
 [[nodiscard]] std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load = Load::kDense);
 
 }  // namespace palpa::blob

@@ -114,7 +114,13 @@ inline constexpr std::uint16_t kRecordSize = 16;
 
 // ---- reading ----
 
-/// Reads a trace file of any version and encoding (binary by its magic, else text).
+/// The largest trace file read: 1 GiB (256 MiB where size_t has 32 bits); an hour of text
+/// samples at 1 kHz is about 200 MB.
+inline constexpr std::uint64_t kMaxTraceFileBytes =
+    sizeof(std::size_t) >= 8 ? std::uint64_t{1} << 30 : std::uint64_t{256} << 20;
+
+/// Reads a trace file of any version and encoding (binary by its magic, else text). Only a
+/// regular file of at most kMaxTraceFileBytes (io::ReadBounded); errors name the file.
 [[nodiscard]] std::expected<TraceFile, TraceError> ReadTraceFile(const std::string& path);
 
 /// ReadTraceFile, samples only (what palpad's devices take).
