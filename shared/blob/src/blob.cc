@@ -1,7 +1,5 @@
 #include "palpa/blob/blob.h"
 
-#include "palpa/io/file_safety.h"
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -208,22 +206,6 @@ std::vector<std::byte> DenseV1(const FieldView& v2) {
   meta.fit_scale = v2.fit_scale;
   meta.fit_offset_m = v2.fit_offset_m;
   return Encode(meta, phi);
-}
-
-std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load) {
-  // A regular file within kMaxFileBytes (a FIFO or /dev/zero is refused before any read).
-  auto read = io::ReadBounded(path, kMaxFileBytes, "blob file");
-  if (!read) return Fail("file", 0, "%s", read.error().message.c_str());
-  std::vector<std::byte> data = std::move(*read);
-  std::uint16_t version = 0;
-  if (load == Load::kAsStored || data.size() < kHeaderSizeV2 ||
-      std::memcmp(data.data(), kMagic.data(), kMagic.size()) != 0)
-    return data;
-  std::memcpy(&version, data.data() + offsetof(HeaderV1, version), sizeof version);
-  if (version != kVersion2) return data;
-  const auto view = Verify(data);
-  if (!view) return std::unexpected(view.error());
-  return DenseV1(*view);
 }
 
 }  // namespace palpa::blob
