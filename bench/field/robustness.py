@@ -15,6 +15,13 @@ band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|t
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
 use Python's `random` with fixed seeds: every run gives the same inputs. `--compare` runs a second
 palpa binary on the same inputs (e.g. the tree before a change) and prints its figures beside.
+
+Beside palpa, every row gives screened Poisson (Open3D's create_from_point_cloud_poisson, depth 9,
+no density trimming, so its surface is closed) on the same points in the same model frame, scored
+by the same code on the same grid: `palpa eval FIELD --mesh TRUTH --candidate-mesh POISSON.off`
+(exact CGAL distance to the Poisson mesh at every node of palpa's grid, sign from CGAL's
+Side_of_triangle_mesh). Open3D comes from Debian's python3-open3d, installed with apt-get when
+missing; `--no-poisson` skips the column.
 """
 import argparse
 import json
@@ -115,6 +122,60 @@ def inside_on_faces(palpa, blob, work):
     return count
 
 
+def need_open3d():
+    """Imports Open3D, installing Debian's python3-open3d first when it is missing."""
+    try:
+        import open3d
+        return open3d
+    except ImportError:
+        pass
+    cmd = ["apt-get", "install", "-y", "python3-open3d"]
+    if os.geteuid() != 0:
+        cmd = ["sudo"] + cmd
+    print(f"robustness.py: Open3D is missing; running {' '.join(cmd)}", flush=True)
+    try:
+        subprocess.run(cmd, check=True)
+        import open3d
+        return open3d
+    except (OSError, subprocess.CalledProcessError, ImportError) as e:
+        raise SystemExit(f"robustness.py: cannot install python3-open3d ({e}); install it with "
+                         "'apt-get install python3-open3d' (Debian 12) and run this script with /usr/bin/python3, "
+                         "or pass --no-poisson")
+
+
+def poisson(o3d, pts, out, depth):
+    """Screened Poisson surface of oriented points `pts` (model units), written as OFF to `out`."""
+    import numpy as np
+    pcd = o3d.geometry.PointCloud()
+    arr = np.asarray(pts, dtype=np.float64)
+    pcd.points = o3d.utility.Vector3dVector(arr[:, :3])
+    pcd.normals = o3d.utility.Vector3dVector(arr[:, 3:6])
+    t0 = time.monotonic()
+    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth)
+    seconds = time.monotonic() - t0
+    mesh.remove_unreferenced_vertices()
+    v = np.asarray(mesh.vertices)
+    f = np.asarray(mesh.triangles)
+    with open(out, "w") as fh:
+        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        fh.writelines(f"{x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in v)
+        fh.writelines(f"3 {a} {b} {c}\n" for a, b, c in f)
+    return seconds
+
+
+def score_poisson(ev, blob, o3d, pts, mesh, depth, work):
+    """Poisson on `pts`, scored on the grid of `blob` (palpa's field of the same points)."""
+    off = os.path.join(work, "poisson.off")
+    seconds = poisson(o3d, pts, off, depth)
+    e = subprocess.run([ev, "eval", blob, "--mesh", mesh, "--candidate-mesh", off, "--json"],
+                       capture_output=True, text=True)
+    if e.returncode != 0:
+        return {"error": e.stderr.strip().splitlines()[-1] if e.stderr.strip() else f"exit {e.returncode}"}
+    s = json.loads(e.stdout)["score"]
+    return {"mean": s["mean_abs_error"], "wrong": s["wrong_sign_in_band_percent"], "far": s["far_wrong"],
+            "phantom": s["phantom_solid"]["nodes"], "holes": s["holes"]["nodes"], "seconds": seconds}
+
+
 def score(palpa, ev, points, mesh, cells, work):
     """Builds with `palpa`, scores with `ev` (a palpa with far wrong-sign figures)."""
     blob = os.path.join(work, "field.palpa")
@@ -122,7 +183,7 @@ def score(palpa, ev, points, mesh, cells, work):
     b = run(palpa, "build", points, "-o", blob, "--cells", str(cells), "--format", "1", "-q")
     seconds = time.monotonic() - t0
     s = json.loads(run(ev, "eval", blob, "--mesh", mesh, "--json").stdout)["score"]
-    return {
+    return blob, {
         "mean": s["mean_abs_error"], "wrong": s["wrong_sign_in_band_percent"], "far": s["far_wrong"],
         "phantom": s["phantom_solid"]["nodes"], "holes": s["holes"]["nodes"],
         "faces": inside_on_faces(ev, blob, work), "seconds": seconds,
@@ -138,13 +199,18 @@ def main():
     ap.add_argument("--work", default="build/robustness")
     ap.add_argument("--cells", type=int, default=150)
     ap.add_argument("--meshes", default="knot1,fandisk,sphere")
+    ap.add_argument("--depth", type=int, default=9, help="screened Poisson octree depth")
+    ap.add_argument("--no-poisson", action="store_true", help="skip the screened Poisson column")
     args = ap.parse_args()
+    o3d = None if args.no_poisson else need_open3d()
     os.makedirs(args.work, exist_ok=True)
     ev = args.eval_palpa or args.palpa
     cols = [("palpa", args.palpa)] + ([("compare", args.compare)] if args.compare else [])
     print(f"| mesh | input ({args.cells} cells) | " + " | ".join(
-        f"{c} band mean | {c} wrong % | {c} far wrong (phantom/holes) | {c} inside on faces" for c, _ in cols) + " |")
-    print("|---|---|" + "---|---|---|---|" * len(cols))
+        f"{c} band mean | {c} wrong % | {c} far wrong (phantom/holes) | {c} inside on faces" for c, _ in cols) +
+        ("" if o3d is None else f" | Poisson d{args.depth} band mean | Poisson wrong % | Poisson far wrong (phantom/holes)")
+        + " |")
+    print("|---|---|" + "---|---|---|---|" * len(cols) + ("" if o3d is None else "---|---|---|"))
     for name in args.meshes.split(","):
         mesh = f"data/{name}.off"
         base = os.path.join(args.work, f"{name}-5000.xyz")
@@ -160,9 +226,16 @@ def main():
             write_xyz(path, p)
             row = [name, label]
             for c, binary in cols:
-                r = score(binary, ev, path, mesh, args.cells, args.work)
+                blob, r = score(binary, ev, path, mesh, args.cells, args.work)
                 row += [f"{r['mean']:.3f}", f"{r['wrong']:.2f}", f"{r['far']:,} ({r['phantom']:,}/{r['holes']:,})",
                         f"{r['faces']:,}"]
+                if c == "palpa" and o3d is not None:
+                    q = score_poisson(ev, blob, o3d, p, mesh, args.depth, args.work)
+                    poisson_cells = (["n/a", "n/a", q["error"]] if "error" in q else
+                                     [f"{q['mean']:.3f}", f"{q['wrong']:.2f}",
+                                      f"{q['far']:,} ({q['phantom']:,}/{q['holes']:,})"])
+            if o3d is not None:
+                row += poisson_cells
             print("| " + " | ".join(row) + " |", flush=True)
 
 

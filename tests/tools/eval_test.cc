@@ -6,6 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "field_fixtures.h"
@@ -221,6 +223,81 @@ TEST(TrueDistances, IcosphereMeshAgreesWithTheAnalyticSphere) {
   ASSERT_TRUE(r) << r.error().message;
   EXPECT_LT(r->max_abs_error, 0.01);
   EXPECT_EQ(r->gross_wrong_sign, 0u);
+}
+
+// Issue 20: a candidate mesh (screened Poisson's, in the robustness benchmark) is scored by the
+// same code as a field. An icosphere candidate scores as the exact field does against the
+// analytic sphere; the same icosphere moved 4 voxels scores as badly as it is.
+TEST(EvaluateCandidate, IcosphereScoresAsTheExactFieldAndAShiftedOneFails) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  const blob::FieldView view = View(bytes);
+  auto truth = mesh::TrueDistances(view, Truth::Sphere(kSphereRadiusModel), 3);
+  auto candidate = mesh::TrueDistances(view, Truth::Mesh(Icosphere(5, kSphereRadiusModel)), 3);
+  ASSERT_TRUE(truth && candidate);
+  auto field = mesh::Evaluate(view, *truth);
+  auto r = mesh::EvaluateCandidate(*candidate, *truth);
+  ASSERT_TRUE(field && r) << (r ? field.error().message : r.error().message);
+  EXPECT_EQ(r->band_nodes, field->band_nodes);
+  EXPECT_NEAR(r->mean_abs_error, field->mean_abs_error, 0.01);
+  EXPECT_LT(r->max_abs_error, 0.01);
+  EXPECT_EQ(r->gross_wrong_sign, 0u);
+  EXPECT_EQ(r->far_wrong(), 0u);
+
+  // 4 voxels = 2 model units along x (fit_scale 2 mm/unit, voxel 1 mm).
+  auto shifted = mesh::TrueDistances(view, Truth::Mesh(Icosphere(5, kSphereRadiusModel, Eigen::Vector3d(2, 0, 0))), 3);
+  ASSERT_TRUE(shifted);
+  auto bad = mesh::EvaluateCandidate(*shifted, *truth);
+  ASSERT_TRUE(bad) << bad.error().message;
+  EXPECT_GT(bad->mean_abs_error, 1.0);
+  // Band nodes beyond the candidate's own reach get its exact distance, not ±∞.
+  EXPECT_TRUE(std::isfinite(bad->mean_abs_error));
+  // φ − true is at most the shift, reached along the x axis (where the candidate is > 3 voxels off).
+  EXPECT_LE(bad->max_abs_error, 4.0 + 0.02);  // + the icosphere's chord error (< 0.01 voxel)
+  EXPECT_GT(bad->max_abs_error, 3.8);
+  // Inside the shifted ball but > 3 voxels outside the true one: phantom solid, at most 4 voxels
+  // out; holes on the other side likewise.
+  EXPECT_GT(bad->phantom_solid.nodes, 0u);
+  EXPECT_GT(bad->holes.nodes, 0u);
+  EXPECT_LE(bad->phantom_solid.deepest_voxels, 4.0 + 0.02);
+  EXPECT_GT(bad->phantom_solid.deepest_voxels, 3.5);
+
+  // A candidate on another grid is refused.
+  mesh::TrueDistanceGrid other = *candidate;
+  other.voxel_m *= 2;
+  EXPECT_FALSE(mesh::EvaluateCandidate(other, *truth));
+}
+
+// The CLI: --candidate-mesh scores the mesh on FIELD's grid; a mesh that is not closed is refused.
+TEST(EvalCandidateCli, CandidateMeshScoresOnTheFieldsGrid) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "eval_candidate";
+  fs::create_directories(dir);
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x) + 2.0; });
+  const std::string blob = (dir / "field.palpa").string();
+  {
+    std::ofstream f(blob, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  }
+  const std::string truth = (dir / "truth.off").string();
+  const std::string cand = (dir / "cand.off").string();
+  std::ofstream(truth) << ToOff(Icosphere(5, kSphereRadiusModel));
+  std::ofstream(cand) << ToOff(Icosphere(5, kSphereRadiusModel));
+  const auto field = Palpa(fmt::format("eval {} --mesh {} --json", blob, truth));
+  const auto ok = Palpa(fmt::format("eval {} --mesh {} --candidate-mesh {} --json", blob, truth, cand));
+  ASSERT_EQ(field.code, 0) << field.out;
+  ASSERT_EQ(ok.code, 0) << ok.out;
+  const auto fj = nlohmann::json::parse(field.out)["score"];
+  const auto cj = nlohmann::json::parse(ok.out)["score"];
+  EXPECT_NEAR(fj["mean_abs_error"].get<double>(), 2.0, 0.02);  // the field is 2 voxels off
+  EXPECT_LT(cj["mean_abs_error"].get<double>(), 0.01);         // the candidate is the truth
+  EXPECT_EQ(cj["band_nodes"], fj["band_nodes"]);
+  mesh::TriangleMesh open = Icosphere(3, kSphereRadiusModel);
+  open.faces.pop_back();
+  std::ofstream(cand, std::ios::trunc) << ToOff(open);
+  const auto refused = Palpa(fmt::format("eval {} --mesh {} --candidate-mesh {}", blob, truth, cand));
+  EXPECT_EQ(refused.code, 2);
+  EXPECT_NE(refused.out.find("cand.off"), std::string::npos) << refused.out;
 }
 
 // Issue 20: wrong signs far from the surface (phantom solid in free air, holes deep inside) are

@@ -95,7 +95,9 @@ int RunEval(const EvalArgs& args) {
   // the clamp, and scoring there would measure the clamp. The default band (3) shrinks to fit.
   mesh::EvalOptions options;
   // (Evaluate refuses a wider band too; here it is refused before the truth is computed.)
-  const double exact = mesh::ExactBandVoxels(v);
+  // A candidate mesh has an exact distance everywhere: FIELD lends it only its grid.
+  const bool candidate = !args.candidate_mesh.empty();
+  const double exact = candidate ? args.band_voxels : mesh::ExactBandVoxels(v);
   options.band_voxels = args.band_given ? args.band_voxels : std::min(args.band_voxels, exact);
   if (options.band_voxels > exact) {
     fmt::print(stderr,
@@ -112,9 +114,25 @@ int RunEval(const EvalArgs& args) {
   }
   const double seconds_truth = Seconds(t0);
   const auto t1 = std::chrono::steady_clock::now();
-  auto score = mesh::Evaluate(v, *grid, options);
+  std::expected<mesh::EvalResult, mesh::Error> score;
+  if (candidate) {
+    auto m = mesh::ReadClosedMesh(args.candidate_mesh);
+    if (!m) {
+      fmt::print(stderr, "palpa eval: {}\n", m.error().message);
+      return kExitBadInput;
+    }
+    auto c = mesh::TrueDistances(v, mesh::Truth::Mesh(std::move(*m)), std::max(1.0, options.band_voxels));
+    if (!c) {
+      fmt::print(stderr, "palpa eval: {}: {}\n", args.candidate_mesh, c.error().message);
+      return kExitBadInput;
+    }
+    score = mesh::EvaluateCandidate(*c, *grid, options);
+  } else {
+    score = mesh::Evaluate(v, *grid, options);
+  }
+  const std::string& scored = candidate ? args.candidate_mesh : args.field;
   if (!score) {
-    fmt::print(stderr, "palpa eval: {}: {}\n", args.field, score.error().message);
+    fmt::print(stderr, "palpa eval: {}: {}\n", scored, score.error().message);
     return kExitBadInput;
   }
   const double seconds_score = Seconds(t1);
@@ -122,6 +140,7 @@ int RunEval(const EvalArgs& args) {
 
   if (args.json) {
     const nlohmann::ordered_json out = {{"field", args.field},
+                                        {"candidate_mesh", args.candidate_mesh},
                                         {"truth", truth_name},
                                         {"dims", {v.dims[0], v.dims[1], v.dims[2]}},
                                         {"voxel", v.voxel_m},
@@ -133,7 +152,7 @@ int RunEval(const EvalArgs& args) {
     fmt::print("{}\n", out.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
     return kExitOk;
   }
-  fmt::print("{} against {}\n", args.field, truth_name);
+  fmt::print("{} against {}{}\n", scored, truth_name, candidate ? fmt::format(" on the grid of {}", args.field) : "");
   fmt::print("  grid                {} x {} x {} nodes, voxel {:.6f} mm\n", v.dims[0], v.dims[1], v.dims[2],
              v.voxel_m * 1e3);
   fmt::print("  band                |true| <= {:g} voxels: {} nodes\n", options.band_voxels, r.band_nodes);

@@ -216,6 +216,9 @@ int main(int argc, char** argv) {
   eval->add_option("--sphere", ea.sphere_radius, "Truth: sphere of radius R (model units) at the model origin")
       ->excludes(eval_mesh);
   eval->add_flag("--json", ea.json, "Machine-readable output");
+  eval->add_option("--candidate-mesh", ea.candidate_mesh,
+                   "Score this closed triangle mesh (.off, model units; e.g. screened Poisson's) on FIELD's "
+                   "grid instead of FIELD");
   auto* eval_band = eval->add_option("--band", ea.band_voxels,
                                      "Score nodes with |true| <= this many voxels (default 3, or the field's "
                                      "smaller band, e.g. a v2 field's outside band of 2)")

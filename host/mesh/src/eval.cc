@@ -196,19 +196,15 @@ std::expected<TrueDistanceGrid, Error> TrueDistances(const blob::FieldView& fiel
   return out;
 }
 
-std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
-                                          const EvalOptions& options) {
-  if (field.dims != truth.dims || field.voxel_m != truth.voxel_m || field.origin_m[0] != truth.origin_m.x() ||
-      field.origin_m[1] != truth.origin_m.y() || field.origin_m[2] != truth.origin_m.z())
-    return std::unexpected(Error{"the truth was computed on another grid (dims, origin or voxel differ)"});
+namespace {
+
+// The scoring shared by a field and a candidate mesh: phi(n) is the candidate's signed distance
+// at node n (row-major, z fastest), voxels. The grid (dims, origin, voxel) is the truth's.
+template <class Phi>
+std::expected<EvalResult, Error> Score(const Phi& phi_at, const TrueDistanceGrid& truth, const EvalOptions& options) {
   if (!(options.band_voxels > 0) || options.band_voxels > truth.exact_within_voxels)
     return std::unexpected(Error{fmt::format("band {} voxels is outside (0, {}], where the truth is exact",
                                              options.band_voxels, truth.exact_within_voxels)});
-  // Beyond the exact band, scoring would score the clamp.
-  if (options.band_voxels > ExactBandVoxels(field))
-    return std::unexpected(
-        Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels inside, {} outside)",
-                          options.band_voxels, field.band_voxels, field.band_outside)});
   if (!(options.far_beyond_voxels > 0) || options.far_beyond_voxels < options.gross_beyond_voxels)
     return std::unexpected(
         Error{fmt::format("far_beyond_voxels {} must be positive and at least gross_beyond_voxels {}",
@@ -221,15 +217,10 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   double sum_abs = 0;
   double sum_signed = 0;
   std::size_t max_at = 0;
-  const auto sny = static_cast<std::size_t>(field.dims[1]);
-  const auto snz = static_cast<std::size_t>(field.dims[2]);
+  const auto sny = static_cast<std::size_t>(truth.dims[1]);
+  const auto snz = static_cast<std::size_t>(truth.dims[2]);
   for (std::size_t n = 0; n < r.nodes; ++n) {
-    // v1 in its dense payload; v2 read in place, node by node.
-    const std::int32_t q = field.phi != nullptr ? field.phi[n]
-                                                : field.NodeQ16(static_cast<std::int32_t>(n / (sny * snz)),
-                                                                static_cast<std::int32_t>((n / snz) % sny),
-                                                                static_cast<std::int32_t>(n % snz));
-    const double phi = static_cast<double>(q) / 65536.0;
+    const double phi = phi_at(n);
     const double t = truth.voxels[n];
     const bool wrong = (phi <= 0 && t > 0) || (phi > 0 && t < 0);
     if (std::abs(t) <= options.band_voxels) {
@@ -255,17 +246,13 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   const auto rank = static_cast<std::size_t>(std::ceil(0.99 * band)) - 1;
   std::nth_element(abs_errors.begin(), abs_errors.begin() + static_cast<std::ptrdiff_t>(rank), abs_errors.end());
   r.p99_abs_error = abs_errors[rank];
-  r.max_error_at_m =
-      Eigen::Vector3d(field.origin_m[0], field.origin_m[1], field.origin_m[2]) +
-      field.voxel_m * Eigen::Vector3d(static_cast<double>(max_at / (sny * snz)),
-                                      static_cast<double>((max_at / snz) % sny), static_cast<double>(max_at % snz));
+  r.max_error_at_m = truth.origin_m + truth.voxel_m * Eigen::Vector3d(static_cast<double>(max_at / (sny * snz)),
+                                                                      static_cast<double>((max_at / snz) % sny),
+                                                                      static_cast<double>(max_at % snz));
   const auto at_m = [&](std::size_t n) {
     const std::array<double, 3> ijk = {static_cast<double>(n / (sny * snz)), static_cast<double>((n / snz) % sny),
                                        static_cast<double>(n % snz)};
-    Eigen::Vector3d x;
-    for (int a = 0; a < 3; ++a)
-      x[a] = field.origin_m[static_cast<std::size_t>(a)] + field.voxel_m * ijk[static_cast<std::size_t>(a)];
-    return x;
+    return Eigen::Vector3d(truth.origin_m + truth.voxel_m * Eigen::Vector3d(ijk[0], ijk[1], ijk[2]));
   };
   // Depths: the truth is exact where finite; beyond its exact reach (±∞) a mesh truth is asked
   // node by node (in parallel; each answer is exact, so the max does not depend on threads).
@@ -300,6 +287,54 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   r.wrong_sign_in_band_percent = 100.0 * static_cast<double>(r.wrong_sign_in_band) / band;
   r.gross_wrong_sign_percent = 100.0 * static_cast<double>(r.gross_wrong_sign) / static_cast<double>(r.nodes);
   return r;
+}
+
+}  // namespace
+
+std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
+                                          const EvalOptions& options) {
+  if (field.dims != truth.dims || field.voxel_m != truth.voxel_m || field.origin_m[0] != truth.origin_m.x() ||
+      field.origin_m[1] != truth.origin_m.y() || field.origin_m[2] != truth.origin_m.z())
+    return std::unexpected(Error{"the truth was computed on another grid (dims, origin or voxel differ)"});
+  // Beyond the exact band, scoring would score the clamp.
+  if (options.band_voxels > ExactBandVoxels(field))
+    return std::unexpected(
+        Error{fmt::format("band {} voxels exceeds the field's narrow band ({} voxels inside, {} outside)",
+                          options.band_voxels, field.band_voxels, field.band_outside)});
+  const auto sny = static_cast<std::size_t>(field.dims[1]);
+  const auto snz = static_cast<std::size_t>(field.dims[2]);
+  return Score(
+      [&](std::size_t n) {
+        // v1 in its dense payload; v2 read in place, node by node.
+        const std::int32_t q = field.phi != nullptr ? field.phi[n]
+                                                    : field.NodeQ16(static_cast<std::int32_t>(n / (sny * snz)),
+                                                                    static_cast<std::int32_t>((n / snz) % sny),
+                                                                    static_cast<std::int32_t>(n % snz));
+        return static_cast<double>(q) / 65536.0;
+      },
+      truth, options);
+}
+
+std::expected<EvalResult, Error> EvaluateCandidate(const TrueDistanceGrid& candidate, const TrueDistanceGrid& truth,
+                                                   const EvalOptions& options) {
+  if (candidate.dims != truth.dims || candidate.voxel_m != truth.voxel_m || candidate.origin_m != truth.origin_m)
+    return std::unexpected(Error{"the candidate was computed on another grid (dims, origin or voxel differ)"});
+  if (!candidate.mesh_in_voxels)
+    return std::unexpected(Error{"the candidate must be a mesh (its distance is needed beyond its own band)"});
+  const auto sny = static_cast<std::size_t>(truth.dims[1]);
+  const auto snz = static_cast<std::size_t>(truth.dims[2]);
+  return Score(
+      [&](std::size_t n) {
+        const double c = candidate.voxels[n];
+        if (std::isfinite(c)) return c;
+        // Beyond the candidate's exact reach only its sign is stored; a band node of the truth
+        // may lie there when the candidate is far off, so ask the exact distance.
+        if (!(std::abs(static_cast<double>(truth.voxels[n])) <= options.band_voxels)) return c;
+        const Eigen::Vector3d ijk(static_cast<double>(n / (sny * snz)), static_cast<double>((n / snz) % sny),
+                                  static_cast<double>(n % snz));
+        return std::copysign(candidate.mesh_in_voxels->UnsignedDistance(ijk), c);
+      },
+      truth, options);
 }
 
 std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Truth& truth,

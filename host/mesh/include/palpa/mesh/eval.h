@@ -118,6 +118,14 @@ inline double ExactBandVoxels(const blob::FieldView& field) { return std::min(fi
 std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const TrueDistanceGrid& truth,
                                           const EvalOptions& options = {});
 
+/// Scores a candidate surface instead of a field (e.g. screened Poisson's mesh, issue 20): the
+/// candidate's signed distance is `candidate` (TrueDistances of Truth::Mesh(candidate mesh) on the
+/// same grid as `truth`: exact within its reach, beyond it the sign from CGAL Side_of_triangle_mesh,
+/// so the candidate must be closed). Same figures as Evaluate, voxels. Errors: other grid, band
+/// outside the truth's exact reach, empty band.
+std::expected<EvalResult, Error> EvaluateCandidate(const TrueDistanceGrid& candidate, const TrueDistanceGrid& truth,
+                                                   const EvalOptions& options = {});
+
 /// TrueDistances, then Evaluate.
 std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Truth& truth,
                                           const EvalOptions& options = {});
