@@ -15,6 +15,28 @@
 #include "point_cloud.h"
 
 namespace palpa::field {
+namespace {
+
+// Keeps the samples whose `drop` is 0, in order (positions, normals and, when present, the file
+// lines that name them); returns how many are kept.
+std::size_t Compact(PointSet& points, const std::vector<std::uint8_t>& drop) {
+  const std::size_t n = points.positions.size();
+  const bool lines = points.lines.size() == n;
+  std::size_t w = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (drop[i]) continue;
+    points.positions[w] = points.positions[i];
+    points.normals[w] = points.normals[i];
+    if (lines) points.lines[w] = points.lines[i];
+    ++w;
+  }
+  points.positions.resize(w);
+  points.normals.resize(w);
+  if (lines) points.lines.resize(w);
+  return w;
+}
+
+}  // namespace
 
 std::string DroppedSamples::Describe() const {
   std::string out;
@@ -72,19 +94,7 @@ DroppedSamples DropDegenerateSamples(PointSet& points, const std::string& file) 
     d.first_duplicate_place = PointPlace(file, points, *d.first_duplicate);
     d.duplicate_of_place = PointPlace(file, points, *d.duplicate_of);
   }
-  std::size_t w = 0;
-  const bool lines = points.lines.size() == n;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (drop[i]) continue;
-    points.positions[w] = points.positions[i];
-    points.normals[w] = points.normals[i];
-    if (lines) points.lines[w] = points.lines[i];
-    ++w;
-  }
-  points.positions.resize(w);
-  points.normals.resize(w);
-  if (lines) points.lines.resize(w);
-  d.kept = w;
+  d.kept = Compact(points, drop);
   return d;
 }
 
@@ -169,23 +179,9 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
 }
 
 void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices) {
-  const std::size_t n = points.positions.size();
-  const bool lines = points.lines.size() == n;
-  std::size_t w = 0;
-  std::size_t next = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (next < indices.size() && indices[next] == i) {
-      ++next;
-      continue;
-    }
-    points.positions[w] = points.positions[i];
-    points.normals[w] = points.normals[i];
-    if (lines) points.lines[w] = points.lines[i];
-    ++w;
-  }
-  points.positions.resize(w);
-  points.normals.resize(w);
-  if (lines) points.lines.resize(w);
+  std::vector<std::uint8_t> drop(points.positions.size(), 0);
+  for (const std::size_t i : indices) drop[i] = 1;
+  Compact(points, drop);
 }
 
 }  // namespace palpa::field
