@@ -6,25 +6,19 @@
 // refuses (outside the Falcon workspace, time not increasing) are counted too. Both counts are
 // reported after the run, never silent.
 //
-// Files are written under a temporary name and renamed into place by Commit (after fsync), like
+// Files are written through servo::AtomicFile and renamed into place by Commit (after fsync), like
 // --out. Header-only: palpad is the only user.
 #pragma once
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <expected>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 
-#include "palpa/io/file_safety.h"
-#include "palpa/rt/temp_registry.h"
+#include "palpa/servo/report.h"
 #include "palpa/servo/telemetry_drain.h"
 #include "palpa/trace/trace.h"
 
@@ -38,13 +32,19 @@ class Recorder final : public servo::TelemetrySink {
                                                                     const std::string& comment) {
     std::unique_ptr<Recorder> r(new Recorder);
     if (!trace_path.empty()) {
-      if (auto e = r->trace_.Open(trace_path); !e.empty()) return std::unexpected(e);
-      r->writer_ = std::make_unique<trace::TraceStreamWriter>(r->trace_.file, trace_path.ends_with(".ptb"), comment);
+      auto f = servo::AtomicFile::Create(trace_path);
+      if (!f) return std::unexpected(f.error());
+      r->trace_.emplace(std::move(*f));
+      r->trace_path_ = trace_path;
+      r->writer_ = std::make_unique<trace::TraceStreamWriter>(r->trace_->file(), trace_path.ends_with(".ptb"), comment);
       if (!r->writer_->Begin()) return std::unexpected("cannot write " + trace_path);
     }
     if (!timing_path.empty()) {
-      if (auto e = r->timing_.Open(timing_path); !e.empty()) return std::unexpected(e);
-      if (std::fputs("tick,t_s,wake_ns,compute_ns,total_ns,flags\n", r->timing_.file) < 0)
+      auto f = servo::AtomicFile::Create(timing_path);
+      if (!f) return std::unexpected(f.error());
+      r->timing_.emplace(std::move(*f));
+      r->timing_path_ = timing_path;
+      if (std::fputs("tick,t_s,wake_ns,compute_ns,total_ns,flags\n", r->timing_->file()) < 0)
         return std::unexpected("cannot write " + timing_path);
     }
     return r;
@@ -60,10 +60,10 @@ class Recorder final : public servo::TelemetrySink {
     next_tick_ = s.tick + 1;
     ++samples_;
     if (writer_) (void)writer_->Add({s.row.t_s, s.row.hip_m, s.buttons});
-    if (timing_.file != nullptr && !timing_failed_) {
+    if (timing_ && !timing_failed_) {
       // total: deadline to force written (paced), or the compute time alone (fast, no deadline).
       const std::int64_t total = s.wake_latency_ns >= 0 ? s.wake_latency_ns + s.compute_ns : s.compute_ns;
-      if (std::fprintf(timing_.file, "%llu,%.9f,%lld,%lld,%lld,%u\n", static_cast<unsigned long long>(s.tick),
+      if (std::fprintf(timing_->file(), "%llu,%.9f,%lld,%lld,%lld,%u\n", static_cast<unsigned long long>(s.tick),
                        s.row.t_s, static_cast<long long>(s.wake_latency_ns), static_cast<long long>(s.compute_ns),
                        static_cast<long long>(total), s.flags) < 0)
         timing_failed_ = true;
@@ -74,12 +74,12 @@ class Recorder final : public servo::TelemetrySink {
   std::expected<void, std::string> Commit(std::uint64_t ring_dropped) {
     ring_dropped_ = ring_dropped;
     if (writer_) {
-      if (auto done = writer_->Finish(); !done) return std::unexpected(trace_.path + ": " + done.error());
-      if (auto e = trace_.Commit(); !e.empty()) return std::unexpected(e);
+      if (auto done = writer_->Finish(); !done) return std::unexpected(trace_path_ + ": " + done.error());
+      if (auto e = trace_->Commit(); !e) return std::unexpected(e.error());
     }
-    if (timing_.file != nullptr) {
-      if (timing_failed_) return std::unexpected("cannot write " + timing_.path);
-      if (auto e = timing_.Commit(); !e.empty()) return std::unexpected(e);
+    if (timing_) {
+      if (timing_failed_) return std::unexpected("cannot write " + timing_path_);
+      if (auto e = timing_->Commit(); !e) return std::unexpected(e.error());
     }
     return {};
   }
@@ -89,63 +89,21 @@ class Recorder final : public servo::TelemetrySink {
     std::string out;
     const unsigned long long dropped = ring_dropped_ > gaps_ ? ring_dropped_ : gaps_;
     if (writer_)
-      out += "palpad: recorded " + std::to_string(writer_->written()) + " HIP samples to " + trace_.path + " (" +
+      out += "palpad: recorded " + std::to_string(writer_->written()) + " HIP samples to " + trace_path_ + " (" +
              std::to_string(dropped) + " dropped by the full ring, " + std::to_string(writer_->refused()) +
              " refused by the trace format)\n";
-    if (timing_.file != nullptr || timing_.committed)
-      out += "palpad: recorded the timing of " + std::to_string(samples_) + " ticks to " + timing_.path + "\n";
+    if (timing_)
+      out += "palpad: recorded the timing of " + std::to_string(samples_) + " ticks to " + timing_path_ + "\n";
     return out;
   }
 
  private:
   Recorder() = default;
 
-  // A file written as <path>.tmp.XXXXXX ("w+b": the binary trace reads itself back for its CRC)
-  // and renamed onto <path> by Commit; removed if never committed.
-  struct TempFile {
-    std::string path, temp;
-    std::FILE* file = nullptr;
-    bool committed = false;
-    int slot = -1;  // rt::RegisterTempPath slot of `temp`
-    std::string Open(const std::string& p) {
-      path = p;
-      if (auto ok = io::CheckOutputTarget(p); !ok) return ok.error().message;  // never over a device (issue 18)
-      temp = p + ".tmp.XXXXXX";
-      const int fd = mkstemp(temp.data());
-      if (fd < 0) return "cannot create a temporary file for " + p + ": " + std::strerror(errno);
-      const mode_t mask = umask(0);
-      umask(mask);
-      (void)fchmod(fd, static_cast<mode_t>(0666) & ~mask);
-      file = fdopen(fd, "w+b");
-      if (file == nullptr) {
-        close(fd);
-        unlink(temp.c_str());
-        return "cannot open " + temp;
-      }
-      slot = rt::RegisterTempPath(temp.c_str());  // a fatal signal unlinks it
-      return {};
-    }
-    std::string Commit() {
-      const bool ok = std::fflush(file) == 0 && fsync(fileno(file)) == 0;
-      const bool closed = std::fclose(file) == 0;
-      file = nullptr;
-      const bool renamed = ok && closed && std::rename(temp.c_str(), path.c_str()) == 0;
-      if (!renamed) unlink(temp.c_str());
-      rt::UnregisterTempPath(std::exchange(slot, -1));
-      if (!renamed) return "cannot write " + path + ": " + std::strerror(errno);
-      committed = true;
-      return {};
-    }
-    ~TempFile() {
-      if (file != nullptr) {
-        std::fclose(file);
-        unlink(temp.c_str());
-      }
-      rt::UnregisterTempPath(slot);
-    }
-  };
-
-  TempFile trace_, timing_;
+  // Written as <path>.tmp.XXXXXX (servo::AtomicFile: checked target, fsync, rename, the temporary
+  // registered for the fatal-signal path) and renamed onto <path> by Commit; removed if never committed.
+  std::optional<servo::AtomicFile> trace_, timing_;
+  std::string trace_path_, timing_path_;
   std::unique_ptr<trace::TraceStreamWriter> writer_;
   std::uint64_t next_tick_ = 0, gaps_ = 0, samples_ = 0, ring_dropped_ = 0;
   bool timing_failed_ = false;

@@ -69,7 +69,7 @@ std::expected<AtomicFile, std::string> AtomicFile::Create(const std::string& pat
   const mode_t mask = umask(0);
   umask(mask);
   (void)fchmod(fd, static_cast<mode_t>(0666) & ~mask);
-  std::FILE* f = fdopen(fd, "w");
+  std::FILE* f = fdopen(fd, "w+");  // "+": palpad's binary trace reads itself back for its CRC
   if (f == nullptr) {
     std::string message = ErrnoMessage("cannot open", temp);
     close(fd);

@@ -32,7 +32,8 @@ bool WriteCsvRow(std::FILE* out, const LogRow& row);
 /// (its name is in palpa/rt/temp_registry.h while it exists).
 class AtomicFile {
  public:
-  /// Creates `<path>.tmp.XXXXXX` (mode 0666 minus umask). Error: a sentence naming the path.
+  /// Creates `<path>.tmp.XXXXXX` (mode 0666 minus umask), open for writing and reading back.
+  /// Error: a sentence naming the path (a target that is a device, FIFO, socket or directory too).
   static std::expected<AtomicFile, std::string> Create(const std::string& path);
 
   AtomicFile(AtomicFile&& other) noexcept;
