@@ -22,19 +22,6 @@ void Nap() { rt::SleepForNs(kFullRingWaitNs); }
 // (proxy.h). RT-safe: integer arithmetic, ≤ kSeedSteps + 2 samples. Returns true when seeded.
 constexpr int kSeedSteps = 8;
 
-// min(max_force, k·⌈|p − hip|⌉ + 1 LSB): an upper bound of eq. 10's |f| for a proxy seated at `p`,
-// Q16.16 N. The spring of a seeded proxy is shorter than the band (< 2^7 voxels per axis).
-std::int32_t SeatedPull(const proxy::ProxyParams& params, sampler::GridPos p, sampler::GridPos hip) {
-  static constexpr std::int64_t kSpan = std::int64_t{1} << 23;  // 128 voxels: squares sum below 2^48
-  const auto d = [](std::int32_t a, std::int32_t b) {
-    return std::clamp<std::int64_t>(std::int64_t{a} - b, -kSpan, kSpan);
-  };
-  const std::int64_t dx = d(p.x, hip.x), dy = d(p.y, hip.y), dz = d(p.z, hip.z);
-  const auto len = static_cast<std::int64_t>(fixed::ISqrt(dx * dx + dy * dy + dz * dz)) + 1;
-  const std::int64_t max_f = params.max_force.value.raw();
-  return static_cast<std::int32_t>(std::min(max_f, (params.k.value.raw() * len + 65535) >> 16));
-}
-
 bool SeedProxy(const ServoField& f, sampler::GridPos hip, proxy::ProxyState& state) {
   state = proxy::ProxyState{};
   sampler::GridPos p = hip;
@@ -54,7 +41,7 @@ bool SeedProxy(const ServoField& f, sampler::GridPos hip, proxy::ProxyState& sta
       state.valid = true;
       // The spring is already stretched: its force bounds last tick's (the proxy's rise limit
       // starts from it, not from 0), and the swap ramp fades the output from the old field's.
-      state.pull_q16 = SeatedPull(f.params, p, hip);
+      state.pull_q16 = proxy::SpringPullBound(f.params, p, hip);
       return true;
     }
     // Aim a little outside (+1/64 voxel) so the last step lands at φ ≥ 0 rather than just below.

@@ -715,6 +715,12 @@ std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos pro
   return r.force;
 }
 
+std::int32_t SpringPullBound(const ProxyParams& params, GridPos proxy, GridPos hip) {
+  TickResult r;
+  const Vec u = Diff(proxy, hip);
+  return static_cast<std::int32_t>(Force(params, u, CeilLength(u), params.max_force.value.raw(), r));
+}
+
 namespace {
 
 std::int64_t SaturatingAdd(std::int64_t a, std::int64_t b) {

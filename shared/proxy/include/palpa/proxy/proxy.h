@@ -166,6 +166,11 @@ TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& 
 /// in raw units (no overshoot by a bit). RT-safe.
 std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip);
 
+/// The upper bound of |SpringForce| that ProxyTick keeps in ProxyState::pull_q16 (Q16.16 N), for a
+/// proxy seated at `proxy` by someone else (a field swap): its rise limit then starts from the
+/// spring's own force, not from 0. RT-safe.
+std::int32_t SpringPullBound(const ProxyParams& params, GridPos proxy, GridPos hip);
+
 /// Passivity observer (Hannaford & Ryu 2002) for the sampled spring of eq. 10. Call Update once
 /// per tick with the tick's HIP and result. RT-safe, integer only.
 ///
