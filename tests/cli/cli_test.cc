@@ -27,6 +27,13 @@ Outcome Palpa(const std::string& args) { return palpa::test_support::Run(std::st
 
 using Cli = palpa::test_support::TempDirTest;
 
+// Shortest text that reads back as the same double.
+std::string fmt(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", x);
+  return buf;
+}
+
 constexpr const char* kFourPoints = "0 0 0 0 0 -1\n1 0 0 1 0 0\n0 1 0 0 1 0\n0 0 1 0 0 1\n";
 
 TEST_F(Cli, BadPointFilesExitTwoAndWriteNothing) {
@@ -105,6 +112,52 @@ TEST_F(Cli, DegenerateSamplesAreDroppedAndNamed) {
   const Outcome n = Palpa("build " + nan_pos + " -o " + Path("n.palpa") + " --cells 48");
   EXPECT_EQ(n.code, 2) << n.out;
   EXPECT_NE(n.out.find("nanpos.xyz:927: position is not finite"), std::string::npos) << n.out;
+}
+
+// Issue 20: a scanner's bare positions (three numbers a line) are built with estimated, oriented
+// normals and the build says so; a file whose normals are all inward is refused nothing but warned
+// with the remedy, and --normals orient repairs it: the field equals the outward file's (the sign
+// of every normal is recovered exactly, so the samples are the same bit for bit).
+TEST_F(Cli, BarePositionsAreEstimatedAndFlippedNormalsAreReoriented) {
+  std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string bare, inward, outward;
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream values(line);
+    std::array<double, 6> v{};
+    for (double& x : v) values >> x;
+    bare += fmt(v[0]) + " " + fmt(v[1]) + " " + fmt(v[2]) + "\n";
+    outward += line + "\n";
+    inward +=
+        fmt(v[0]) + " " + fmt(v[1]) + " " + fmt(v[2]) + " " + fmt(-v[3]) + " " + fmt(-v[4]) + " " + fmt(-v[5]) + "\n";
+  }
+  const std::string bare_in = Write("bare.xyz", bare);
+  const Outcome b = Palpa("build " + bare_in + " -o " + Path("bare.palpa") + " --cells 48");
+  ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_NE(b.out.find("926 normals estimated (jet fit, 18 neighbours) and oriented: 1 piece (1 closed, 0 open) (the "
+                       "file has no normals)"),
+            std::string::npos)
+      << b.out;
+  EXPECT_EQ(b.out.find("not consistently oriented"), std::string::npos) << b.out;
+
+  const std::string inward_in = Write("inward.xyz", inward);
+  const Outcome keep = Palpa("build " + inward_in + " -o " + Path("keep.palpa") + " --cells 48 -q");
+  ASSERT_EQ(keep.code, 0) << keep.out;
+  EXPECT_NE(keep.out.find("Rerun with --normals orient"), std::string::npos) << keep.out;
+  const Outcome orient = Palpa("build " + inward_in + " -o " + Path("orient.palpa") + " --cells 48 --normals orient");
+  ASSERT_EQ(orient.code, 0) << orient.out;
+  EXPECT_NE(orient.out.find("normals oriented, 926 signs changed"), std::string::npos) << orient.out;
+  const std::string outward_in = Write("outward.xyz", outward);
+  ASSERT_EQ(Palpa("build " + outward_in + " -o " + Path("outward.palpa") + " --cells 48 -q").code, 0);
+  ASSERT_EQ(Palpa("export " + Path("orient.palpa") + " --npy " + Path("orient.npy")).code, 0);
+  ASSERT_EQ(Palpa("export " + Path("outward.palpa") + " --npy " + Path("outward.npy")).code, 0);
+  const auto read = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  EXPECT_EQ(read(Path("orient.npy")), read(Path("outward.npy")));
+  const Outcome bad = Palpa("build " + outward_in + " -o " + Path("x.palpa") + " --normals guess");
+  EXPECT_NE(bad.code, 0);
+  EXPECT_FALSE(fs::exists(Path("x.palpa")));
 }
 
 // Issue 20: a stray sample off the surface and a point at 1e30 are ignored, counted and named

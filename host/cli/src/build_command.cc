@@ -18,6 +18,7 @@
 #include "grid_faces.h"
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
+#include "palpa/field/normals.h"
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
 
@@ -88,10 +89,22 @@ int RunBuild(const BuildArgs& args) {
   if (const int refused = CheckOutput("build", args.output, {args.points}); refused != kExitOk) return refused;
   // Degenerate samples are dropped here, after reading, and named (issue 20): a real scan with a
   // few zero normals must not be refused whole. --strict refuses them.
-  auto points = field::ReadPoints(args.points, field::ReadOptions{.keep_bad_normals = true});
+  auto points =
+      field::ReadPoints(args.points, field::ReadOptions{.keep_bad_normals = true, .allow_missing_normals = true});
   if (!points) {
     fmt::print(stderr, "palpa build: {}\n", points.error().message);
     return kExitBadInput;
+  }
+  // --normals (issue 20): a file of bare positions is always estimated; estimate replaces the
+  // file's normals before the degenerate ones would be dropped, orient keeps their lines.
+  const field::NormalsMode normals_mode = !points->has_normals         ? field::NormalsMode::kEstimate
+                                          : args.normals == "orient"   ? field::NormalsMode::kOrient
+                                          : args.normals == "estimate" ? field::NormalsMode::kEstimate
+                                                                       : field::NormalsMode::kKeep;
+  field::NormalsReport normals_report;
+  if (normals_mode == field::NormalsMode::kEstimate) {
+    field::EstimateNormalLines(points->positions, points->normals);  // lines; signs below
+    normals_report.estimated = points->positions.size();
   }
   const field::DroppedSamples dropped = field::DropDegenerateSamples(*points, args.points);
   if (dropped.Total() > 0) {
@@ -106,6 +119,14 @@ int RunBuild(const BuildArgs& args) {
     }
     fmt::print(stderr, "palpa build: warning: {}: dropped {}; {} samples remain (--strict refuses such files)\n",
                args.points, dropped.Describe(), dropped.kept);
+  }
+  if (normals_mode != field::NormalsMode::kKeep) {
+    field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
+                         normals_report, normals_mode == field::NormalsMode::kEstimate);
+    if (normals_mode == field::NormalsMode::kEstimate) field::RefineNormalLines(points->positions, points->normals);
+    if (!args.quiet || !points->has_normals)
+      fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
+                 points->has_normals ? "" : " (the file has no normals)");
   }
   // Stray samples and outliers are ignored before the fit (one point at 1e30 must not collapse
   // --fit) and before the build (each would make solid of its own: a phantom wall).
@@ -147,8 +168,11 @@ int RunBuild(const BuildArgs& args) {
   if (built.orientation.Inconsistent()) {
     fmt::print(stderr,
                "palpa build: warning: {}: normals are not consistently oriented: {}. Normals must point out of the "
-               "object; the field is wrong near these points.\n",
-               args.points, built.orientation.Describe());
+               "object; the field is wrong near these points.{}\n",
+               args.points, built.orientation.Describe(),
+               normals_mode == field::NormalsMode::kKeep
+                   ? " Rerun with --normals orient to re-choose their signs, or --normals estimate to replace them."
+                   : "");
   }
 
   // Issue 20: say when the scan is open (the winding number closed a surface where no sample

@@ -29,7 +29,8 @@ struct BuildArgs {
   std::string method = "erosion";
   int threads = 0;  ///< 0: all cores
   bool quiet = false;
-  bool strict = false;  ///< refuse degenerate samples instead of dropping them (issue 20)
+  bool strict = false;           ///< refuse degenerate samples instead of dropping them (issue 20)
+  std::string normals = "keep";  ///< keep | orient | estimate (field::NormalsMode, issue 20)
 };
 int RunBuild(const BuildArgs& args);
 

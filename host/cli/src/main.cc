@@ -57,6 +57,13 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
   build->add_flag("-q,--quiet", b.quiet, "No report on stdout");
+  build
+      ->add_option("--normals", b.normals,
+                   "keep: the file's normals (default); orient: re-choose their signs (Hoppe MST, outward from the "
+                   "divergence or the file's majority); estimate: new normals from a jet fit, then orient. A file "
+                   "without normals (x y z lines, PLY without nx ny nz) is always estimated")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"keep", "orient", "estimate"}));
   build->add_flag("--strict", b.strict,
                   "Refuse a point file with any zero-length or non-finite normal or exact duplicate (default: "
                   "drop them and say so)");

@@ -259,7 +259,7 @@ std::optional<std::string> AddOrientedPoint(PointSet& points, const Eigen::Vecto
 }
 
 std::optional<std::string> ReadPly(const std::string& name, std::string_view text, const AddPoint& add,
-                                   PointSet& points) {
+                                   PointSet& points, bool allow_missing_normals) {
   const auto fail = [](std::string message) { return std::optional<std::string>(std::move(message)); };
   // Header: lines up to "end_header".
   std::size_t pos = 0, line_number = 0;
@@ -350,10 +350,16 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
     if (slot[k] == elements[vertex].properties.size())
       missing += fmt::format("{}{}", missing.empty() ? "" : ", ", kWanted[k]);
   }
-  if (!missing.empty()) {
-    return fail(
-        fmt::format("{}: the vertex element has no scalar {} (oriented points need x y z nx ny nz)", name, missing));
+  // Bare positions: allowed only when the caller estimates the normals, and only when all three
+  // normal properties are absent (one or two of them is a broken file, not a scanner's output).
+  const bool bare = allow_missing_normals && slot[0] < elements[vertex].properties.size() &&
+                    slot[1] < elements[vertex].properties.size() && slot[2] < elements[vertex].properties.size() &&
+                    missing == "nx, ny, nz";
+  if (!missing.empty() && !bare) {
+    return fail(fmt::format("{}: the vertex element has no scalar {} (oriented points need x y z nx ny nz{})", name,
+                            missing, allow_missing_normals ? "; bare positions need x y z" : ""));
   }
+  if (bare) points.has_normals = false;
 
   // Body: elements in header order; those before the vertices are read and dropped, those after
   // are not needed.
@@ -401,6 +407,12 @@ std::optional<std::string> ReadPly(const std::string& name, std::string_view tex
       if (!body.EndLine(which)) return fail(body.error);
       if (e != vertex) continue;
       const Eigen::Vector3d position(values[slot[0]], values[slot[1]], values[slot[2]]);
+      if (bare) {
+        if (!position.allFinite()) return fail(fmt::format("{} (vertex {}): position is not finite", where, n));
+        points.positions.push_back(position);
+        points.normals.push_back(Eigen::Vector3d::Zero());
+        continue;
+      }
       const Eigen::Vector3d normal(values[slot[3]], values[slot[4]], values[slot[5]]);
       if (auto bad = add(points, position, normal)) {
         return fail(fmt::format("{} (vertex {}): {}", where, n, *bad));

@@ -26,9 +26,11 @@ std::optional<std::string> AddOrientedPoint(PointSet& points, const Eigen::Vecto
                                             const Eigen::Vector3d& normal);
 
 /// Parses the PLY file `name` whose bytes are `text` into `points` (appended); see ReadPoints for
-/// the contract. Returns the error, or nothing. (Not std::expected<PointSet>: the fuzzer's clang
-/// 14 cannot destroy libstdc++ 12's expected of a non-trivial type.)
+/// the contract. With `allow_missing_normals`, a vertex element without nx ny nz is read as bare
+/// positions (normals (0, 0, 0), points.has_normals = false; ReadOptions::allow_missing_normals). Returns the error, or
+/// nothing. (Not std::expected<PointSet>: the fuzzer's clang 14 cannot destroy libstdc++ 12's expected of a non-trivial
+/// type.)
 std::optional<std::string> ReadPly(const std::string& name, std::string_view text, const AddPoint& add,
-                                   PointSet& points);
+                                   PointSet& points, bool allow_missing_normals = false);
 
 }  // namespace palpa::field::detail

@@ -25,6 +25,7 @@ namespace palpa::field {
 namespace {
 
 constexpr int kNumbersPerLine = 6;
+constexpr int kBareNumbersPerLine = 3;  // x y z, ReadOptions::allow_missing_normals
 constexpr std::size_t kMinPoints = 4;
 
 bool IsSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
@@ -71,7 +72,8 @@ std::optional<std::string> AddPointKeepingBadNormal(PointSet& points, const Eige
 
 // A PLY file: the header is looked for in the first kMaxPlyHeaderBytes (so a file without one is
 // refused after reading that much), then the whole file is read within kMaxPlyBytes.
-std::expected<PointSet, Error> ReadPlyFile(const std::string& name, const detail::AddPoint& add) {
+std::expected<PointSet, Error> ReadPlyFile(const std::string& name, const detail::AddPoint& add,
+                                           bool allow_missing_normals) {
   std::uint64_t size = 0;
   auto fd = io::OpenRegular(name, "point file", &size);
   if (!fd) return std::unexpected(Error{std::move(fd.error().message)});
@@ -104,7 +106,8 @@ std::expected<PointSet, Error> ReadPlyFile(const std::string& name, const detail
   ::close(*fd);
   if (failed) return std::unexpected(Error{fmt::format("{}: read error: {}", Quoted(name), std::strerror(read_errno))});
   PointSet points;
-  if (auto error = detail::ReadPly(Quoted(name), text, add, points)) return std::unexpected(Error{std::move(*error)});
+  if (auto error = detail::ReadPly(Quoted(name), text, add, points, allow_missing_normals))
+    return std::unexpected(Error{std::move(*error)});
   return AtLeastFour(name, std::move(points));
 }
 
@@ -123,7 +126,7 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, con
                                              io::Escape(path.extension().string()))});
   }
   const detail::AddPoint add = options.keep_bad_normals ? AddPointKeepingBadNormal : detail::AddOrientedPoint;
-  if (ext == ".ply") return ReadPlyFile(name, add);
+  if (ext == ".ply") return ReadPlyFile(name, add, options.allow_missing_normals);
 
   // Streamed line by line: memory is bounded by the points, not by what the file holds.
   auto reader = io::LineReader::Open(name, kMaxLineBytes, "point file");
@@ -166,11 +169,24 @@ std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, con
       pos = end;
     }
     if (count == 0) continue;  // blank or comment-only line
-    if (count != kNumbersPerLine) {
-      return std::unexpected(Error{
-          fmt::format("{}:{}: expected {} numbers, found {}", Quoted(name), line_number, kNumbersPerLine, count)});
+    // The first point decides whether the file has normals (bare positions only when allowed).
+    if (points.positions.empty() && options.allow_missing_normals && count == kBareNumbersPerLine)
+      points.has_normals = false;
+    const int want = points.has_normals ? kNumbersPerLine : kBareNumbersPerLine;
+    if (count != want) {
+      return std::unexpected(
+          Error{fmt::format("{}:{}: expected {} numbers, found {}{}", Quoted(name), line_number, want, count,
+                            points.has_normals ? "" : " (the file's first point has no normal)")});
     }
     const Eigen::Vector3d p(values[0], values[1], values[2]);
+    if (!points.has_normals) {
+      if (!p.allFinite())
+        return std::unexpected(Error{fmt::format("{}:{}: position is not finite", Quoted(name), line_number)});
+      points.positions.push_back(p);
+      points.normals.push_back(Eigen::Vector3d::Zero());
+      points.lines.push_back(static_cast<std::size_t>(line_number));
+      continue;
+    }
     const Eigen::Vector3d n(values[3], values[4], values[5]);
     if (auto bad = add(points, p, n)) {
       return std::unexpected(Error{fmt::format("{}:{}: {}", Quoted(name), line_number, *bad)});

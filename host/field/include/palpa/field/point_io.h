@@ -20,6 +20,10 @@ struct PointSet {
   /// With ReadOptions::keep_bad_normals only: the file line of each point (.xyz, .pwn; empty for
   /// PLY, whose points are named by vertex number), for messages about single points (PointPlace).
   std::vector<std::size_t> lines;
+  /// False when the file gave positions only (ReadOptions::allow_missing_normals: `.xyz` lines
+  /// of three numbers, a PLY vertex without nx ny nz); normals are then all (0, 0, 0) until
+  /// EstimateNormals (normals.h) fills them.
+  bool has_normals = true;
 };
 
 struct ReadOptions {
@@ -27,6 +31,12 @@ struct ReadOptions {
   /// of refusing the file: the caller drops it and says so (palpa build, issue 20: a real scan
   /// with 2 such normals of 4,387 must not be refused whole). Non-finite positions stay errors.
   bool keep_bad_normals = false;
+  /// Accept points without normals (issue 20: a scanner's bare positions), for a caller that
+  /// estimates them: `.xyz`/`.pwn` whose every line has three numbers `x y z`, and PLY whose
+  /// vertex has no nx ny nz. The normals are (0, 0, 0) and PointSet::has_normals is false. A file
+  /// that mixes three- and six-number lines is refused at the first line that differs. Implies
+  /// keep_bad_normals' `lines` bookkeeping for .xyz/.pwn.
+  bool allow_missing_normals = false;
 };
 
 // Reads oriented points, by extension (case-insensitive):
@@ -45,7 +55,8 @@ struct ReadOptions {
 //   unterminated header (its line), no vertex element or a missing x … nz property, a body that
 //   ends early ("scan.ply: byte 1234: the file ends inside vertex 77 of 100 'nz' (2 of 4 bytes
 //   there)"), and a bad point, named by its vertex number.
-// With options.keep_bad_normals, a zero or non-finite normal is kept as (0, 0, 0) (see ReadOptions).
+// With options.keep_bad_normals, a zero or non-finite normal is kept as (0, 0, 0) (see ReadOptions);
+// with options.allow_missing_normals, a file of bare positions is read (PointSet::has_normals).
 std::expected<PointSet, Error> ReadPoints(const std::filesystem::path& path, const ReadOptions& options = {});
 
 // Where point `index` of `points` (read from `file`) is, for messages: "scan.xyz:17" (its line,

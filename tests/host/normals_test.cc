@@ -1,0 +1,252 @@
+// Normals estimated and oriented (issue 20, `palpa build --normals`), against analytic shapes:
+// the sphere's radial normals, the cube's face normals, a dome (an open one-sided scan), two
+// separate bodies, and a thin plate whose two sides face away from each other.
+#include "palpa/field/normals.h"
+
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "palpa/field/point_io.h"
+#include "test_util.h"
+
+namespace palpa::field {
+namespace {
+
+using V3 = Eigen::Vector3d;
+
+struct Oriented {
+  std::vector<V3> positions;
+  std::vector<V3> normals;  // exact outward normals
+};
+
+// n points on a sphere (Fibonacci lattice), radius r about c; only those with z >= z_min / r.
+Oriented Sphere(std::size_t n, double r, const V3& c = V3::Zero(), double z_min = -2.0) {
+  Oriented out;
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  for (std::size_t i = 0; i < n; ++i) {
+    const double z = 1.0 - 2.0 * (static_cast<double>(i) + 0.5) / static_cast<double>(n);
+    const double rho = std::sqrt(1.0 - z * z);
+    const double t = golden * static_cast<double>(i);
+    const V3 u(rho * std::cos(t), rho * std::sin(t), z);
+    if (z < z_min) continue;
+    out.positions.push_back(c + r * u);
+    out.normals.push_back(u);
+  }
+  return out;
+}
+
+// The six faces of the cube [-1, 1]^3, each an m x m grid of cell centres (no sample on an edge).
+Oriented Cube(int m) {
+  Oriented out;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (const double side : {-1.0, 1.0}) {
+      for (int a = 0; a < m; ++a) {
+        for (int b = 0; b < m; ++b) {
+          V3 p;
+          p[axis] = side;
+          p[(axis + 1) % 3] = -1.0 + 2.0 * (a + 0.5) / m;
+          p[(axis + 2) % 3] = -1.0 + 2.0 * (b + 0.5) / m;
+          V3 n = V3::Zero();
+          n[axis] = side;
+          out.positions.push_back(p);
+          out.normals.push_back(n);
+        }
+      }
+    }
+  }
+  return out;
+}
+
+double WorstAngleDeg(const std::vector<V3>& got, const std::vector<V3>& want) {
+  double worst = 0;
+  for (std::size_t i = 0; i < got.size(); ++i)
+    worst = std::max(worst, std::acos(std::clamp(got[i].dot(want[i]), -1.0, 1.0)) * 180.0 / std::numbers::pi);
+  return worst;
+}
+
+std::size_t CountAgainst(const std::vector<V3>& got, const std::vector<V3>& want) {
+  std::size_t against = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) against += got[i].dot(want[i]) < 0 ? 1u : 0u;
+  return against;
+}
+
+TEST(Normals, JetLinesOnASphereAreRadial) {
+  const Oriented s = Sphere(4000, 0.03);
+  std::vector<V3> lines;
+  EstimateNormalLines(s.positions, lines);
+  ASSERT_EQ(lines.size(), s.positions.size());
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    EXPECT_NEAR(lines[i].norm(), 1.0, 1e-12);
+    EXPECT_GT(std::abs(lines[i].dot(s.normals[i])), std::cos(1.0 * std::numbers::pi / 180)) << i;
+  }
+}
+
+TEST(Normals, EstimatedAndOrientedSphereIsOutward) {
+  const Oriented s = Sphere(3000, 2.5, V3(10, -4, 7));  // off the origin: the sign may not assume it
+  std::vector<V3> normals;
+  EstimateNormalLines(s.positions, normals);
+  NormalsReport report;
+  OrientNormals(s.positions, normals, false, report, true);
+  EXPECT_EQ(CountAgainst(normals, s.normals), 0u);
+  EXPECT_LT(WorstAngleDeg(normals, s.normals), 1.0);
+  EXPECT_EQ(report.components, 1u);
+  EXPECT_EQ(report.open_components, 0u);
+}
+
+TEST(Normals, OrientRepairsRandomAndWholeFlipsOnACubeWithSharpEdges) {
+  const Oriented cube = Cube(24);
+  for (const double fraction : {0.05, 0.5, 1.0}) {
+    std::vector<V3> normals = cube.normals;
+    std::mt19937_64 rng(7);
+    std::size_t flipped = 0;
+    for (V3& n : normals) {
+      if (static_cast<double>(rng() >> 11) * 0x1p-53 < fraction) {
+        n = -n;
+        ++flipped;
+      }
+    }
+    NormalsReport report;
+    OrientNormals(cube.positions, normals, true, report);
+    // Lines kept exactly, signs all outward again; the count says how many changed.
+    EXPECT_EQ(WorstAngleDeg(normals, cube.normals), 0.0) << fraction;
+    EXPECT_EQ(report.flipped, flipped) << fraction;
+    EXPECT_EQ(report.components, 1u);
+  }
+}
+
+TEST(Normals, OrientKeepsConsistentNormalsOfAThinPlate) {
+  // Two 40 x 40 sheets 0.3 spacings apart, normals away from each other: the nearest neighbours
+  // across the wall are closer than those along it, and their normals are antiparallel.
+  Oriented plate;
+  for (int a = 0; a < 40; ++a) {
+    for (int b = 0; b < 40; ++b) {
+      for (const double side : {-1.0, 1.0}) {
+        plate.positions.emplace_back(a * 1.0, b * 1.0, side * 0.15);
+        plate.normals.emplace_back(0, 0, side);
+      }
+    }
+  }
+  std::vector<V3> normals = plate.normals;
+  NormalsReport report;
+  OrientNormals(plate.positions, normals, true, report);
+  EXPECT_EQ(CountAgainst(normals, plate.normals), 0u) << report.Describe();
+  EXPECT_EQ(report.flipped, 0u);
+}
+
+TEST(Normals, AOneSidedScanOfADomeIsOrientedOutward) {
+  const Oriented dome = Sphere(6000, 1.0, V3(0.5, 0.2, -3.0), 0.2);  // the cap above z = 0.2 r
+  std::vector<V3> normals;
+  EstimateNormalLines(dome.positions, normals);
+  NormalsReport report;
+  OrientNormals(dome.positions, normals, false, report, true);
+  EXPECT_EQ(CountAgainst(normals, dome.normals), 0u);
+  EXPECT_EQ(report.components, 1u);
+  EXPECT_EQ(report.open_components, 1u);
+}
+
+TEST(Normals, SeparateBodiesAreOrientedEachOnItsOwn) {
+  Oriented both = Sphere(1500, 1.0, V3(-3, 0, 0));
+  const Oriented second = Sphere(1500, 0.7, V3(3, 1, 0));
+  both.positions.insert(both.positions.end(), second.positions.begin(), second.positions.end());
+  both.normals.insert(both.normals.end(), second.normals.begin(), second.normals.end());
+  std::vector<V3> normals;
+  EstimateNormalLines(both.positions, normals);
+  NormalsReport report;
+  OrientNormals(both.positions, normals, false, report, true);
+  EXPECT_EQ(CountAgainst(normals, both.normals), 0u);
+  EXPECT_EQ(report.components, 2u);
+}
+
+TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
+  const Oriented cube = Cube(20);  // spacing 0.1
+  std::vector<V3> normals;
+  EstimateNormalLines(cube.positions, normals);
+  NormalsReport report;
+  OrientNormals(cube.positions, normals, false, report, true);
+  ASSERT_EQ(CountAgainst(normals, cube.normals), 0u);
+  const auto off_by_more_than = [&](const std::vector<V3>& got, double degrees) {
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      count += got[i].dot(cube.normals[i]) < std::cos(degrees * std::numbers::pi / 180) ? 1u : 0u;
+    return count;
+  };
+  const std::size_t jet_off = off_by_more_than(normals, 5.0);
+  RefineNormalLines(cube.positions, normals);
+  EXPECT_EQ(CountAgainst(normals, cube.normals), 0u);  // signs kept
+  const std::size_t refined_off = off_by_more_than(normals, 5.0);
+  // The jet fit blends the faces over ~2 rows next to each edge (12 edges x 20 x 2 sides x 2
+  // rows); the refined lines are the exact face normals from the second row on. (The first rows
+  // of two faces lie on one 45-degree plane through the edge, as well supported as either face.)
+  EXPECT_GT(jet_off, 800u);
+  EXPECT_LT(refined_off, jet_off / 2);
+  for (std::size_t i = 0; i < normals.size(); ++i) {
+    const V3& p = cube.positions[i];
+    const double from_edge =
+        1.0 - std::max({std::abs(p.x()) < 1 ? std::abs(p.x()) : 0.0, std::abs(p.y()) < 1 ? std::abs(p.y()) : 0.0,
+                        std::abs(p.z()) < 1 ? std::abs(p.z()) : 0.0});
+    if (from_edge > 0.1) {
+      EXPECT_GT(normals[i].dot(cube.normals[i]), std::cos(0.5 * std::numbers::pi / 180)) << i;
+    }
+  }
+}
+
+TEST(ReadPoints, BarePositionsAreReadOnlyWhenAllowed) {
+  const testing::TempFile file("bare.xyz", "0 0 0\n1 0 0\n# comment\n0 1 0\n0 0 1\n");
+  auto refused = ReadPoints(file.path());
+  ASSERT_FALSE(refused.has_value());
+  EXPECT_NE(refused.error().message.find("bare.xyz:1: expected 6 numbers, found 3"), std::string::npos)
+      << refused.error().message;
+  auto read = ReadPoints(file.path(), ReadOptions{.allow_missing_normals = true});
+  ASSERT_TRUE(read.has_value()) << read.error().message;
+  EXPECT_FALSE(read->has_normals);
+  ASSERT_EQ(read->positions.size(), 4u);
+  EXPECT_EQ(read->positions[1], V3(1, 0, 0));
+  EXPECT_EQ(read->normals[2], V3::Zero());
+  EXPECT_EQ(read->lines[2], 4u);  // the comment line counts
+}
+
+TEST(ReadPoints, AFileMixingBareAndOrientedPointsNamesTheLine) {
+  const testing::TempFile file("mixed.xyz", "0 0 0\n1 0 0\n0 1 0 0 0 1\n0 0 1\n");
+  auto read = ReadPoints(file.path(), ReadOptions{.allow_missing_normals = true});
+  ASSERT_FALSE(read.has_value());
+  EXPECT_NE(
+      read.error().message.find("mixed.xyz:3: expected 3 numbers, found 6 (the file's first point has no normal)"),
+      std::string::npos)
+      << read.error().message;
+  // Oriented first, bare later: the oriented file's rule.
+  const testing::TempFile other("mixed2.xyz", "0 0 0 0 0 1\n1 0 0\n");
+  auto read2 = ReadPoints(other.path(), ReadOptions{.allow_missing_normals = true});
+  ASSERT_FALSE(read2.has_value());
+  EXPECT_NE(read2.error().message.find("mixed2.xyz:2: expected 6 numbers, found 3"), std::string::npos);
+}
+
+TEST(ReadPly, VerticesWithoutNormalsAreReadOnlyWhenAllowed) {
+  const testing::TempFile file(
+      "bare.ply",
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+      "property float z\nproperty uchar red\nend_header\n0 0 0 1\n1 0 0 2\n0 1 0 3\n0 0 1 4\n");
+  auto refused = ReadPoints(file.path());
+  ASSERT_FALSE(refused.has_value());
+  EXPECT_NE(refused.error().message.find("has no scalar nx, ny, nz"), std::string::npos) << refused.error().message;
+  auto read = ReadPoints(file.path(), ReadOptions{.allow_missing_normals = true});
+  ASSERT_TRUE(read.has_value()) << read.error().message;
+  EXPECT_FALSE(read->has_normals);
+  ASSERT_EQ(read->positions.size(), 4u);
+  EXPECT_EQ(read->positions[3], V3(0, 0, 1));
+  // One normal component of three is a broken file, not bare positions.
+  const testing::TempFile partial(
+      "partial.ply",
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+      "property float z\nproperty float nx\nend_header\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\n");
+  auto broken = ReadPoints(partial.path(), ReadOptions{.allow_missing_normals = true});
+  ASSERT_FALSE(broken.has_value());
+  EXPECT_NE(broken.error().message.find("has no scalar ny, nz"), std::string::npos) << broken.error().message;
+}
+
+}  // namespace
+}  // namespace palpa::field
