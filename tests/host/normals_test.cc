@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "palpa/field/point_io.h"
+#include "palpa/field/samples.h"
 #include "test_util.h"
 
 namespace palpa::field {
@@ -246,6 +247,92 @@ TEST(ReadPly, VerticesWithoutNormalsAreReadOnlyWhenAllowed) {
   auto broken = ReadPoints(partial.path(), ReadOptions{.allow_missing_normals = true});
   ASSERT_FALSE(broken.has_value());
   EXPECT_NE(broken.error().message.find("has no scalar ny, nz"), std::string::npos) << broken.error().message;
+}
+
+}  // namespace
+}  // namespace palpa::field
+
+namespace palpa::field {
+namespace {
+
+// Issue 20, dense scans: one sample per cell and normal side, only where the set is denser than
+// the cells; the two sides of a thin wall stay apart; a far outlier stays its own sample.
+TEST(SimplifyDenseSamples, ASetNoDenserThanTheCellsIsLeftAsItWas) {
+  PointSet sparse;
+  for (int i = 0; i < 50; ++i) {
+    for (int j = 0; j < 50; ++j) {
+      sparse.positions.emplace_back(i * 1.0 + 0.01 * j, j * 1.0, 0.0);
+      sparse.normals.emplace_back(0, 0, 1);
+    }
+  }
+  const PointSet before = sparse;
+  const Simplification s = SimplifyDenseSamples(sparse, 0.9);
+  EXPECT_FALSE(s.Applied());
+  EXPECT_EQ(sparse.positions, before.positions);
+  EXPECT_EQ(sparse.normals, before.normals);
+}
+
+TEST(SimplifyDenseSamples, ADenseSphereKeepsOneSamplePerCellOnTheSurface) {
+  PointSet dense;
+  const double r = 10.0;
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  const std::size_t n = 200000;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double z = 1.0 - 2.0 * (static_cast<double>(i) + 0.5) / static_cast<double>(n);
+    const double rho = std::sqrt(1.0 - z * z);
+    const Eigen::Vector3d u(rho * std::cos(golden * static_cast<double>(i)),
+                            rho * std::sin(golden * static_cast<double>(i)), z);
+    dense.positions.push_back(r * u);
+    dense.normals.push_back(u);
+  }
+  const double cell = 0.5;  // area 4 pi r^2 = 1,257: ~5,000-10,000 cells hold samples
+  const Simplification s = SimplifyDenseSamples(dense, cell);
+  ASSERT_TRUE(s.Applied());
+  EXPECT_EQ(s.before, n);
+  EXPECT_EQ(s.after, dense.positions.size());
+  EXPECT_GT(s.after, 4000u);
+  EXPECT_LT(s.after, 20000u);
+  for (std::size_t i = 0; i < dense.positions.size(); ++i) {
+    // The mean of samples in a cell lies within the sagitta of a cell's chord, (sqrt(3) cell)^2 /
+    // (8 r) = 0.0094, inside the sphere; the normal within the angle the cell subtends.
+    const double d = dense.positions[i].norm() - r;
+    EXPECT_LE(d, 1e-9) << i;
+    EXPECT_GT(d, -0.0094) << i;
+    EXPECT_NEAR(dense.normals[i].norm(), 1.0, 1e-12);
+    EXPECT_GT(dense.normals[i].dot(dense.positions[i].normalized()), std::cos(std::sqrt(3.0) * cell / r)) << i;
+  }
+}
+
+TEST(SimplifyDenseSamples, TheTwoSidesOfAThinWallStayApart) {
+  PointSet wall;
+  for (int i = 0; i < 100; ++i) {
+    for (int j = 0; j < 100; ++j) {
+      for (const double side : {-1.0, 1.0}) {
+        wall.positions.emplace_back(i * 0.1, j * 0.1, side * 0.05);
+        wall.normals.emplace_back(0, 0, side);
+      }
+    }
+  }
+  wall.positions.emplace_back(1e30, 0, 0);  // a far outlier: its cell number must not overflow
+  wall.normals.emplace_back(1, 0, 0);
+  const Simplification s = SimplifyDenseSamples(wall, 1.0);  // both sides in every cell
+  ASSERT_TRUE(s.Applied());
+  EXPECT_EQ(s.after, 10u * 10u * 2u + 1u);
+  std::size_t up = 0, down = 0, far = 0;
+  for (std::size_t i = 0; i < wall.positions.size(); ++i) {
+    if (wall.positions[i].x() > 1e29) {
+      ++far;
+      EXPECT_EQ(wall.normals[i], Eigen::Vector3d(1, 0, 0));
+      continue;
+    }
+    const bool top = wall.normals[i].z() > 0;
+    (top ? up : down) += 1;
+    EXPECT_EQ(wall.normals[i], Eigen::Vector3d(0, 0, top ? 1 : -1));
+    EXPECT_NEAR(wall.positions[i].z(), top ? 0.05 : -0.05, 1e-12);
+  }
+  EXPECT_EQ(up, 100u);
+  EXPECT_EQ(down, 100u);
+  EXPECT_EQ(far, 1u);
 }
 
 }  // namespace

@@ -184,4 +184,67 @@ void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices) {
   Compact(points, drop);
 }
 
+Simplification SimplifyDenseSamples(PointSet& points, double cell) {
+  const std::size_t n = points.positions.size();
+  Simplification out{n, n, cell};
+  if (n < 2 || !(cell > 0)) return out;
+  // Cell coordinates relative to the lowest corner; a key sorts by cell then sample.
+  Eigen::Vector3d lo = points.positions[0];
+  for (const Eigen::Vector3d& p : points.positions) lo = lo.cwiseMin(p);
+  std::vector<std::array<std::int64_t, 3>> key(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i)
+      for (Eigen::Index a = 0; a < 3; ++a)
+        // Clamped: a far outlier's cell number must not overflow (it stays a cell of its own).
+        key[i][static_cast<std::size_t>(2 - a)] =
+            static_cast<std::int64_t>(std::min(std::floor((points.positions[i][a] - lo[a]) / cell), 0x1p62));
+  });
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
+  std::size_t cells = 1;
+  for (std::size_t r = 1; r < n; ++r) cells += key[order[r]] != key[order[r - 1]] ? 1u : 0u;
+  if (2 * cells > n) return out;  // not denser than the grid: leave the set as it was
+
+  const bool lines = points.lines.size() == n;
+  PointSet merged;
+  merged.has_normals = points.has_normals;
+  merged.positions.reserve(cells);
+  merged.normals.reserve(cells);
+  struct Group {
+    Eigen::Vector3d first_normal, position_sum, normal_sum;
+    std::size_t count, first;
+  };
+  std::vector<Group> groups;
+  for (std::size_t begin = 0; begin < n;) {
+    std::size_t end = begin + 1;
+    while (end < n && key[order[end]] == key[order[begin]]) ++end;
+    groups.clear();
+    for (std::size_t r = begin; r < end; ++r) {
+      const std::size_t i = order[r];
+      const Eigen::Vector3d& nrm = points.normals[i];
+      auto g =
+          std::find_if(groups.begin(), groups.end(), [&](const Group& x) { return x.first_normal.dot(nrm) >= 0.7; });
+      if (g == groups.end()) {
+        groups.push_back(Group{nrm, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 0, i});
+        g = groups.end() - 1;
+      }
+      g->position_sum += points.positions[i];
+      g->normal_sum += nrm;
+      ++g->count;
+    }
+    for (const Group& g : groups) {
+      merged.positions.push_back(g.position_sum / static_cast<double>(g.count));
+      const double length = g.normal_sum.norm();
+      merged.normals.push_back(length > 0 ? Eigen::Vector3d(g.normal_sum / length) : g.first_normal);
+      if (lines) merged.lines.push_back(points.lines[g.first]);
+    }
+    begin = end;
+  }
+  out.after = merged.positions.size();
+  points = std::move(merged);
+  return out;
+}
+
 }  // namespace palpa::field

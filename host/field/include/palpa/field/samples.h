@@ -73,4 +73,23 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
 /// Removes `indices` (ascending) from points (positions, normals, and lines when present).
 void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices);
 
+/// What SimplifyDenseSamples did.
+struct Simplification {
+  std::size_t before = 0;
+  std::size_t after = 0;  ///< == before when the set was left as it was
+  double cell = 0;        ///< cell side, units of the positions
+  bool Applied() const { return after < before; }
+};
+
+/// Points denser than the grid carry no more information at its resolution (issue 20: a phone or
+/// tabletop scanner's 2,000,000 points, whose packing alone ran for minutes). Groups the samples
+/// by cube cell of side `cell` (the voxel) and, within a cell, by normal: a sample joins the
+/// first group whose first normal is within 45 degrees of its own (n . n_g >= 0.7), so the two
+/// sides of a thin wall and the faces of a sharp edge stay apart. Each group becomes one sample:
+/// the mean position and the normalised mean normal; its file line is its first sample's.
+/// Applied only when it at least halves the count (on average two samples a cell or more), so a
+/// set at or below the grid's resolution is left bit for bit as it was. Order: by cell (z, y, x),
+/// then first sample. Deterministic. O(n log n). Positions finite, normals unit.
+Simplification SimplifyDenseSamples(PointSet& points, double cell);
+
 }  // namespace palpa::field
