@@ -9,7 +9,7 @@ as in the issue's table (fewer samples; Gaussian position noise of 0.5 and 1 vox
 normal noise, each normal turned by |N(0, 15 deg)| about a random tangent axis; 2 % outliers,
 uniform in the bounding box with random normals; one stray point 8 voxels outside the surface;
 an open scan, one side never scanned: the samples whose normal points away from +z by more than
-100 deg dropped). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
+100 deg dropped; the normals stripped, which palpa then estimates and orients). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
 band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|true| > 3: phantom
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
@@ -97,6 +97,9 @@ def perturbations(pts, voxel):
     p = pts[17]
     out.append(("one stray point 8 voxels out", pts + [[p[a] + 8 * voxel * p[3 + a] for a in range(3)] + p[3:]]))
     out.append(("open scan (no -z side)", [p for p in pts if p[5] > -math.cos(math.radians(80))]))
+    # Bare positions: palpa estimates and orients the normals (--normals); Poisson gets Open3D's
+    # estimate_normals and orient_normals_consistent_tangent_plane on the same positions.
+    out.append(("normals stripped (estimated)", [p[:3] for p in pts]))
     return out
 
 
@@ -149,7 +152,15 @@ def poisson(o3d, pts, out, depth, clean=False):
     pcd = o3d.geometry.PointCloud()
     arr = np.asarray(pts, dtype=np.float64)
     pcd.points = o3d.utility.Vector3dVector(arr[:, :3])
-    pcd.normals = o3d.utility.Vector3dVector(arr[:, 3:6])
+    if arr.shape[1] >= 6:
+        pcd.normals = o3d.utility.Vector3dVector(arr[:, 3:6])
+    else:  # bare positions: Open3D's own normal estimation and MST orientation
+        pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(18))
+        pcd.orient_normals_consistent_tangent_plane(12)
+        # Its MST sign is arbitrary per cloud: outward by the divergence sum, as palpa's.
+        nrm = np.asarray(pcd.normals)
+        if float(np.sum(np.einsum("ij,ij->i", nrm, arr[:, :3] - arr[:, :3].mean(axis=0)))) < 0:
+            pcd.normals = o3d.utility.Vector3dVector(-nrm)
     t0 = time.monotonic()
     mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth)
     seconds = time.monotonic() - t0

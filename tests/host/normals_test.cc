@@ -10,6 +10,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
@@ -333,6 +334,63 @@ TEST(SimplifyDenseSamples, TheTwoSidesOfAThinWallStayApart) {
   EXPECT_EQ(up, 100u);
   EXPECT_EQ(down, 100u);
   EXPECT_EQ(far, 1u);
+}
+
+}  // namespace
+}  // namespace palpa::field
+
+namespace palpa::field {
+namespace {
+
+// Issue 20: outliers that FindStraySamples passes (near the surface, with a plausible normal)
+// are found by the winding number's jump across them; true samples are not, on a smooth sphere,
+// at a cube's sharp edges and corners, and on a plate thinner than its spacing.
+TEST(FindWindingOutliers, NearSurfaceOutliersAreFoundAndTrueSamplesKept) {
+  Oriented sphere = Sphere(4000, 1.0);
+  const std::size_t n = sphere.positions.size();
+  // Spacing: ~sqrt(4 pi / 4000) = 0.056; 16th neighbour ~0.13. Outliers 0.05-0.1 off the surface,
+  // outside and inside, normals tilted 40-60 degrees from the radial direction.
+  std::mt19937_64 rng(3);
+  const auto uniform = [&] { return static_cast<double>(rng() >> 11) * 0x1p-53; };
+  std::vector<std::size_t> planted;
+  for (int o = 0; o < 20; ++o) {
+    V3 u(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+    u.normalize();
+    const double r = (o % 2 == 0 ? 1.0 : -1.0) * (0.05 + 0.05 * uniform()) + 1.0;
+    V3 t = u.cross(V3(0.3, 0.5, 0.8)).normalized();
+    const double tilt = (40.0 + 20.0 * uniform()) * std::numbers::pi / 180;
+    planted.push_back(sphere.positions.size());
+    sphere.positions.push_back(r * u);
+    sphere.normals.push_back(std::cos(tilt) * u + std::sin(tilt) * t);
+  }
+  const WindingOutliers found = FindWindingOutliers(sphere.positions, sphere.normals);
+  for (const std::size_t i : found.indices) EXPECT_GE(i, n) << "a true sample was taken for an outlier: " << i;
+  EXPECT_GE(found.indices.size(), 16u);  // most of the 20 (one just above the surface can pass)
+  ASSERT_TRUE(found.worst.has_value());
+  EXPECT_GE(*found.worst, n);
+  EXPECT_LT(found.worst_jump, 0.5);
+
+  const Oriented cube = Cube(24);
+  EXPECT_TRUE(FindWindingOutliers(cube.positions, cube.normals).indices.empty());
+  Oriented plate;
+  for (int a = 0; a < 40; ++a) {
+    for (int b = 0; b < 40; ++b) {
+      for (const double side : {-1.0, 1.0}) {
+        plate.positions.emplace_back(a * 1.0, b * 1.0, side * 0.45);
+        plate.normals.emplace_back(0, 0, side);
+      }
+    }
+  }
+  EXPECT_TRUE(FindWindingOutliers(plate.positions, plate.normals).indices.empty());
+}
+
+TEST(FindWindingOutliers, AFlippedNormalIsAnOutlier) {
+  Oriented sphere = Sphere(3000, 1.0);
+  sphere.normals[1234] = -sphere.normals[1234];
+  const WindingOutliers found = FindWindingOutliers(sphere.positions, sphere.normals);
+  ASSERT_EQ(found.indices.size(), 1u);
+  EXPECT_EQ(found.indices[0], 1234u);
+  EXPECT_LT(found.worst_jump, 0.0);
 }
 
 }  // namespace

@@ -204,6 +204,18 @@ int RunBuild(const BuildArgs& args) {
   options.method = args.method == "erosion" ? field::FieldMethod::kErosion
                    : args.method == "edt"   ? field::FieldMethod::kEdt
                                             : field::FieldMethod::kHermite;
+  // Outliers near the surface with a plausible normal pass the stray-sample test above, and each
+  // makes phantom solid several voxels deep: the samples' winding number, which should rise by
+  // about 1 across every sample along its normal, finds them (issue 20).
+  if (const field::WindingOutliers outliers = field::FindWindingOutliers(device.positions, device.normals);
+      !outliers.indices.empty()) {
+    fmt::print(stderr,
+               "palpa build: warning: {}: ignored {} sample{} that the surface's inside and outside disagree with "
+               "(the samples' winding number barely changes across {}); the worst: {}\n",
+               args.points, outliers.indices.size(), outliers.indices.size() == 1 ? "" : "s",
+               outliers.indices.size() == 1 ? "it" : "them", field::PointPlace(args.points, device, *outliers.worst));
+    field::RemoveSamples(device, outliers.indices);
+  }
   field::BuildResult built;
   {
     ProgressBar bar;

@@ -28,7 +28,8 @@ namespace {
 using V3 = Eigen::Vector3d;
 
 constexpr int kQuadricNeighbours = 16;
-constexpr double kQuadricAgreeCos = 0.8;  // neighbours (and blended patches) within ~37 degrees
+constexpr double kPatchNoiseVoxels = 0.1;  // FitPatch's noise test, RMS height scatter
+constexpr double kQuadricAgreeCos = 0.8;   // neighbours (and blended patches) within ~37 degrees
 constexpr int kBlendPatches = 4;
 // The winding number's areas: pi s^2 / k with s the kth neighbour distance. Unbiased on random
 // samples for any k; on regular lattices k = 16 is within 3 % (k = 8: up to 14 %, which moves
@@ -160,10 +161,29 @@ Patch FitPatch(const KdTree& tree, const std::vector<V3>& positions, const std::
     const V5 s = m.ldlt().solve(r);
     if (s.allFinite()) sol = s;
   }
+  // Noise (issue 20): the patch passes through P_i, so P_i's own position noise would reach the
+  // field whole. Where the neighbours' heights scatter about the patch by more than
+  // kPatchNoiseVoxels RMS (clean samples, sharp edges included, stay far below: only agreeing
+  // normals are fitted), the patch is moved along n to the mean height of P_i and its
+  // neighbours, its shape kept: noise of sigma then costs ~sigma / sqrt(17) instead of sigma.
+  V3 origin = p;
+  if (used >= 2) {
+    double sum = 0.0, sum2 = 0.0;
+    for (std::size_t a = 0; a < got; ++a) {
+      const std::size_t j = idx[a];
+      if (j == i || normals[j].dot(n) < kQuadricAgreeCos) continue;
+      const V3 d = (positions[j] - p) / voxel;
+      const double u = d.dot(t1), v = d.dot(t2);
+      const double e = d.dot(n) - (sol[0] * u * u + sol[1] * u * v + sol[2] * v * v + sol[3] * u + sol[4] * v);
+      sum += e;
+      sum2 += e * e;
+    }
+    if (sum2 > kPatchNoiseVoxels * kPatchNoiseVoxels * used) origin = p + (voxel * sum / (used + 1)) * n;
+  }
   const auto f3 = [](const V3& v) {
     return std::array<float, 3>{static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
   };
-  return Patch{f3(p / voxel),
+  return Patch{f3(origin / voxel),
                f3(t1),
                f3(t2),
                f3(n),

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <numbers>
 #include <numeric>
 #include <vector>
 
@@ -12,6 +13,7 @@
 #include <tbb/parallel_for.h>
 #include <Eigen/Eigenvalues>
 
+#include "palpa/field/winding.h"
 #include "point_cloud.h"
 
 namespace palpa::field {
@@ -244,6 +246,75 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
   }
   out.after = merged.positions.size();
   points = std::move(merged);
+  return out;
+}
+
+WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& positions,
+                                    const std::vector<Eigen::Vector3d>& normals, double min_jump) {
+  constexpr double kSureOutlierJump = 0.0;
+  constexpr double kPlaneOffset = 0.2;  // x the 16th neighbour's distance
+  WindingOutliers out;
+  const std::size_t n = positions.size();
+  constexpr std::size_t kNeighbours = 16;
+  if (n <= kNeighbours || normals.size() != n) return out;
+  const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kNeighbours));
+  const WindingNumber winding(positions, normals, areas);
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  std::vector<double> jump(n, 1.0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+    std::array<std::size_t, kNeighbours + 1> idx{};
+    std::array<double, kNeighbours + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
+      double d = 0.5 * std::sqrt(d2[got - 1]);
+      for (std::size_t m = 0; m < got; ++m)
+        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
+          d = std::min(d, 0.4 * std::sqrt(d2[m]));
+          break;
+        }
+      if (!(d > 0)) continue;
+      const Eigen::Vector3d& p = positions[i];
+      const Eigen::Vector3d& nrm = normals[i];
+      const double a = areas[i];
+      const double own_dipole = a / (4.0 * std::numbers::pi * d * d);  // at each probe, +inside -outside
+      const double rho2 = a / std::numbers::pi;
+      const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + rho2));
+      jump[i] = winding(p - d * nrm) - winding(p + d * nrm) - 2.0 * own_dipole + 2.0 * own_disc;
+      if (jump[i] < kSureOutlierJump || !(jump[i] < min_jump)) continue;
+      // Between the two: next to a sharp edge or a fin the jump of a true sample is low too, but
+      // it lies on the plane of the neighbours that share its normal (fandisk: offsets below
+      // 0.02 x the 16th neighbour's distance); an outlier does not, or has no such neighbours.
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero(), mean_normal = Eigen::Vector3d::Zero();
+      int agree = 0;
+      for (std::size_t m = 0; m < got; ++m) {
+        if (idx[m] == i || normals[idx[m]].dot(nrm) < 0.8) continue;
+        centre += positions[idx[m]];
+        mean_normal += normals[idx[m]];
+        ++agree;
+      }
+      if (agree < 2) continue;  // no neighbour shares its normal: an outlier
+      centre /= agree;
+      const Eigen::Vector3d plane_normal = mean_normal.normalized();
+      double noise2 = 0;  // the agreeing neighbours' own mean square offset: noise widens the test
+      for (std::size_t m = 0; m < got; ++m) {
+        if (idx[m] == i || normals[idx[m]].dot(nrm) < 0.8) continue;
+        const double o = (positions[idx[m]] - centre).dot(plane_normal);
+        noise2 += o * o;
+      }
+      const double offset = std::abs((p - centre).dot(plane_normal));
+      if (offset <= std::max(kPlaneOffset * std::sqrt(d2[got - 1]), 3.0 * std::sqrt(noise2 / agree)))
+        jump[i] = min_jump;
+    }
+  });
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(jump[i] < min_jump)) continue;
+    out.indices.push_back(i);
+    if (!out.worst || jump[i] < out.worst_jump) {
+      out.worst = i;
+      out.worst_jump = jump[i];
+    }
+  }
   return out;
 }
 

@@ -22,6 +22,8 @@ PointSet ApplyTransform(const Transform& transform, const PointSet& points) {
   out.positions.reserve(points.positions.size());
   for (const Eigen::Vector3d& p : points.positions) out.positions.push_back(transform.Apply(p));
   out.normals = points.normals;
+  out.lines = points.lines;
+  out.has_normals = points.has_normals;
   return out;
 }
 
