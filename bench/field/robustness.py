@@ -9,7 +9,9 @@ as in the issue's table (fewer samples; Gaussian position noise of 0.5 and 1 vox
 normal noise, each normal turned by |N(0, 15 deg)| about a random tangent axis; 2 % outliers,
 uniform in the bounding box with random normals; one stray point 8 voxels outside the surface;
 an open scan, one side never scanned: the samples whose normal points away from +z by more than
-100 deg dropped; the normals stripped, which palpa then estimates and orients). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
+100 deg dropped; the normals stripped, which palpa then estimates and orients; virtual range scans
+from 6 views on the upper hemisphere, `palpa sample --views 6`, without and with range noise of 0.5
+voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
 band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|true| > 3: phantom
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
@@ -244,7 +246,14 @@ def main():
         run(args.palpa, "build", base, "-o", probe, "--cells", str(args.cells), "-q")
         info = json.loads(run(args.palpa, "info", "--json", probe).stdout)
         voxel = info["voxel"] / info["fit_scale"]
-        for label, p in perturbations(pts, voxel):
+        rows = perturbations(pts, voxel)
+        # Virtual range scans (palpa sample --views): open, occluded, with and without range noise.
+        for noise in (0.0, 0.5):
+            scan = os.path.join(args.work, f"{name}-scan-{noise}.xyz")
+            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", "1", "--views", "6", "--range-noise",
+                repr(noise * voxel), "-o", scan, "-q")
+            rows.append((f"range scan, 6 views" + (f", range noise {noise} voxel" if noise else ""), read_xyz(scan)))
+        for label, p in rows:
             path = os.path.join(args.work, f"{name}-{label.replace(' ', '_')}.xyz")
             write_xyz(path, p)
             row = [name, label]

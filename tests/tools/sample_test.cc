@@ -196,6 +196,82 @@ TEST(SampleSurface, RefusesZeroCount) {
   EXPECT_FALSE(mesh::SampleSurface(Box(Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones()), 0, 1));
 }
 
+// Issue 20: virtual range scans. Points lie on the faces hit, with those faces' outward normals;
+// the underside is never seen from the upper hemisphere; what another body hides from every view
+// gets no sample; the count is at most -n; the seed decides; range noise moves points along rays.
+TriangleMesh TwoBoxes() {
+  TriangleMesh plate = Box({0, 0, 0}, {4, 4, 0.2});
+  const TriangleMesh tower = Box({1.5, 1.5, 0.201}, {2.5, 2.5, 3});  // 1/1000 above the plate
+  const int offset = static_cast<int>(plate.vertices.size());
+  plate.vertices.insert(plate.vertices.end(), tower.vertices.begin(), tower.vertices.end());
+  for (auto f : tower.faces) plate.faces.push_back({f[0] + offset, f[1] + offset, f[2] + offset});
+  return plate;
+}
+
+TEST(RangeScan, PointsOnTheFacesHitNeverUnderneathNorInTheShadow) {
+  const TriangleMesh m = TwoBoxes();
+  ASSERT_TRUE(mesh::CheckClosedOriented(m, "two boxes"));
+  auto scan = mesh::RangeScan(m, 20000, 6, 0.0, 1);
+  ASSERT_TRUE(scan) << scan.error().message;
+  // 40,000 rays over views that just hold the bounding sphere: the boxes fill about a quarter.
+  ASSERT_GT(scan->positions.size(), 5000u);
+  ASSERT_LE(scan->positions.size(), 20000u);
+  std::size_t on_plate_top = 0;
+  for (std::size_t i = 0; i < scan->positions.size(); ++i) {
+    const Eigen::Vector3d& p = scan->positions[i];
+    const Eigen::Vector3d& n = scan->normals[i];
+    int axis = -1;
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(std::abs(n[a]) - 1) < 1e-12) axis = a;
+    ASSERT_GE(axis, 0) << n.transpose();
+    EXPECT_GT(n.z(), -0.5) << "a point on an underside: " << p.transpose();
+    // On a face of one of the boxes, the one its normal names.
+    const bool tower = p.z() > 0.2005;
+    const Eigen::Vector3d lo = tower ? Eigen::Vector3d(1.5, 1.5, 0.201) : Eigen::Vector3d(0, 0, 0);
+    const Eigen::Vector3d hi = tower ? Eigen::Vector3d(2.5, 2.5, 3) : Eigen::Vector3d(4, 4, 0.2);
+    EXPECT_NEAR(p[axis], n[axis] > 0 ? hi[axis] : lo[axis], 1e-9) << p.transpose();
+    if (!tower && axis == 2) {
+      ++on_plate_top;
+      // Under the tower: a ray through the 0.001 gap meets the plate at more than 10 degrees of
+      // elevation (else it grazes, and is dropped), so it reaches at most 0.006 under it.
+      EXPECT_FALSE(p.x() > 1.6 && p.x() < 2.4 && p.y() > 1.6 && p.y() < 2.4) << "in the shadow: " << p.transpose();
+    }
+  }
+  EXPECT_GT(on_plate_top, 1000u);
+}
+
+TEST(RangeScan, DeterministicForASeedAndRangeNoiseAlongTheRays) {
+  const TriangleMesh box = Box({0, 0, 0}, {1, 2, 3});
+  auto a = mesh::RangeScan(box, 5000, 3, 0.0, 7);
+  auto b = mesh::RangeScan(box, 5000, 3, 0.0, 7);
+  auto c = mesh::RangeScan(box, 5000, 3, 0.0, 8);
+  ASSERT_TRUE(a && b && c);
+  EXPECT_EQ(a->positions, b->positions);
+  EXPECT_NE(a->positions, c->positions);
+  // Noise of sigma along the rays: on the top face (z = 3, normal +z), z - 3 = noise * dir.z with
+  // |dir.z| between sin 10 and 1 degrees' worth: its spread is below sigma and well above 0.
+  const double sigma = 0.01;
+  auto noisy = mesh::RangeScan(box, 5000, 3, sigma, 7);
+  ASSERT_TRUE(noisy);
+  double sum = 0, sum2 = 0;
+  std::size_t top = 0;
+  for (std::size_t i = 0; i < noisy->positions.size(); ++i) {
+    if (noisy->normals[i].z() < 0.5) continue;
+    const double dz = noisy->positions[i].z() - 3.0;
+    sum += dz;
+    sum2 += dz * dz;
+    ++top;
+  }
+  ASSERT_GT(top, 500u);
+  const double mean = sum / static_cast<double>(top);
+  const double sd = std::sqrt(sum2 / static_cast<double>(top) - mean * mean);
+  EXPECT_NEAR(mean, 0.0, 4 * sigma / std::sqrt(static_cast<double>(top)));
+  EXPECT_LT(sd, sigma);
+  EXPECT_GT(sd, 0.2 * sigma);
+  EXPECT_FALSE(mesh::RangeScan(box, 0, 3, 0.0, 1));
+  EXPECT_FALSE(mesh::RangeScan(box, 10, 0, 0.0, 1));
+}
+
 class SampleCli : public TempDirTest {};
 
 TEST_F(SampleCli, WritesReadableDeterministicPointsOnTheSphere) {
@@ -217,6 +293,20 @@ TEST_F(SampleCli, WritesReadableDeterministicPointsOnTheSphere) {
     EXPECT_GT(pts->positions[i].norm(), 0.45);
     EXPECT_GT(pts->normals[i].dot(pts->positions[i].normalized()), 0.95);
   }
+}
+
+TEST_F(SampleCli, RangeScanIsAnOpenScanAndRangeNoiseNeedsViews) {
+  const Outcome r = Palpa("sample " + DataFile("knot1.off").string() + " -n 3000 --views 4 -o " + Path("scan.xyz"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("range scan from 4 views on the upper hemisphere"), std::string::npos) << r.out;
+  auto pts = field::ReadPoints(Path("scan.xyz"));
+  ASSERT_TRUE(pts) << pts.error().message;
+  EXPECT_LE(pts->positions.size(), 3000u);
+  EXPECT_GT(pts->positions.size(), 1000u);
+  const Outcome bad =
+      Palpa("sample " + DataFile("knot1.off").string() + " -n 30 --range-noise 0.1 -o " + Path("x.xyz"));
+  EXPECT_NE(bad.code, 0);
+  EXPECT_FALSE(fs::exists(Path("x.xyz")));
 }
 
 TEST_F(SampleCli, BadMeshExitsTwoAndWritesNothing) {

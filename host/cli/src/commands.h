@@ -78,6 +78,8 @@ struct SampleArgs {
   std::string output;      ///< POINTS.xyz, written atomically
   std::uint64_t seed = 1;  ///< same seed, same points
   bool quiet = false;
+  int views = 0;             ///< > 0: a virtual range scan from this many viewpoints (mesh::RangeScan)
+  double range_noise = 0.0;  ///< with views: Gaussian range noise, model units
 };
 int RunSample(const SampleArgs& args);
 

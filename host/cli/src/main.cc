@@ -214,6 +214,14 @@ int main(int argc, char** argv) {
   sample->add_option("-n,--count", sa.count, "Number of points")->required()->check(CLI::Range(1, 10000000));
   sample->add_option("-o,--output", sa.output, "Output POINTS.xyz (x y z nx ny nz), written atomically")->required();
   sample->add_option("--seed", sa.seed, "Random seed: the same seed gives the same points")->capture_default_str();
+  auto* views = sample
+                    ->add_option("--views", sa.views,
+                                 "A virtual range scan instead: cameras on the upper hemisphere, first hits only, "
+                                 "an open scan of at most -n points (docs/tools.md)")
+                    ->check(CLI::Range(1, 1000));
+  sample->add_option("--range-noise", sa.range_noise, "With --views: Gaussian noise along each ray, model units")
+      ->check(CLI::NonNegativeNumber)
+      ->needs(views);
   sample->add_flag("-q,--quiet", sa.quiet, "No report on stdout");
 
   EvalArgs ea;

@@ -17,7 +17,8 @@ int RunSample(const SampleArgs& args) {
     fmt::print(stderr, "palpa sample: {}\n", mesh.error().message);
     return kExitBadInput;
   }
-  auto points = mesh::SampleSurface(*mesh, args.count, args.seed, args.mesh);
+  auto points = args.views > 0 ? mesh::RangeScan(*mesh, args.count, args.views, args.range_noise, args.seed, args.mesh)
+                               : mesh::SampleSurface(*mesh, args.count, args.seed, args.mesh);
   if (!points) {
     fmt::print(stderr, "palpa sample: {}\n", points.error().message);
     return kExitBadInput;
@@ -32,6 +33,9 @@ int RunSample(const SampleArgs& args) {
                args.mesh, mesh->vertices.size(), mesh->faces.size(), mesh::SurfaceArea(*mesh),
                mesh::SignedVolume(*mesh), flipped ? " (faces wound inward: normals flipped outward)" : "",
                points->positions.size(), args.output, args.seed);
+  if (!args.quiet && args.views > 0)
+    fmt::print("  range scan from {} view{} on the upper hemisphere, range noise {:.4g}: an open scan\n", args.views,
+               args.views == 1 ? "" : "s", args.range_noise);
   return kExitOk;
 }
 

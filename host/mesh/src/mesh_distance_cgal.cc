@@ -56,6 +56,16 @@ double ExactMeshDistance::UnsignedDistance(const Eigen::Vector3d& p, Eigen::Vect
   return std::sqrt(CGAL::to_double(CGAL::squared_distance(q, c)));
 }
 
+std::optional<ExactMeshDistance::RayHit> ExactMeshDistance::FirstHit(const Eigen::Vector3d& origin,
+                                                                     const Eigen::Vector3d& dir) const {
+  const Kernel::Ray_3 ray(ToPoint(origin), Kernel::Vector_3(dir.x(), dir.y(), dir.z()));
+  const auto hit = impl_->tree.first_intersection(ray);
+  if (!hit) return std::nullopt;
+  const Point* p = boost::get<Point>(&hit->first);
+  if (p == nullptr) return std::nullopt;  // a segment: the ray runs along a face (grazing)
+  return RayHit{Eigen::Vector3d(p->x(), p->y(), p->z()), static_cast<std::size_t>(hit->second.idx())};
+}
+
 Eigen::Vector3d ExactMeshDistance::AnySurfacePoint() const {
   const Point& v = impl_->surface.point(*impl_->surface.vertices().begin());
   return {v.x(), v.y(), v.z()};

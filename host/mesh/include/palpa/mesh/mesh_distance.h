@@ -2,6 +2,8 @@
 // closest point; Side_of_triangle_mesh ray casting). The ground truth of `palpa eval`. Non-RT.
 #pragma once
 
+#include <optional>
+
 #include <memory>
 
 #include <Eigen/Core>
@@ -31,6 +33,13 @@ class ExactMeshDistance {
   double UnsignedDistance(const Eigen::Vector3d& p, Eigen::Vector3d& hint) const;
   /// A point of the surface (the first vertex), to start a chain of hinted queries.
   Eigen::Vector3d AnySurfacePoint() const;
+  /// First intersection of the ray origin + t dir (t > 0) with the mesh: the point and the index
+  /// of the face hit (the input mesh's face order), or nothing (CGAL AABB_tree::first_intersection).
+  struct RayHit {
+    Eigen::Vector3d point;
+    std::size_t face = 0;
+  };
+  std::optional<RayHit> FirstHit(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir) const;
   /// −1 strictly inside, 0 on the surface, +1 outside (CGAL::Side_of_triangle_mesh, exact
   /// predicates on the Epick kernel).
   int Side(const Eigen::Vector3d& p) const;
