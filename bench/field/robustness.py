@@ -185,8 +185,8 @@ def poisson(o3d, pts, out, depth, clean=False):
 def score_poisson(ev, blob, o3d, pts, mesh, depth, work):
     """Poisson on `pts`, scored on the grid of `blob` (palpa's field of the same points)."""
     off = os.path.join(work, "poisson.off")
-    # Scored as Open3D returns it; if that mesh is not closed and manifold, once more after
-    # Open3D's own clean-up (the table says which rows needed it).
+    # Scored as Open3D returns it (an open or non-manifold mesh is signed by its winding number,
+    # and the row says so); if eval still refuses it, once more after Open3D's own clean-up.
     for clean in (False, True):
         seconds = poisson(o3d, pts, off, depth, clean)
         e = subprocess.run([ev, "eval", blob, "--mesh", mesh, "--candidate-mesh", off, "--json"],
@@ -195,10 +195,11 @@ def score_poisson(ev, blob, o3d, pts, mesh, depth, work):
             break
     if e.returncode != 0:
         return {"error": e.stderr.strip().splitlines()[-1] if e.stderr.strip() else f"exit {e.returncode}"}
-    s = json.loads(e.stdout)["score"]
+    j = json.loads(e.stdout)
+    s = j["score"]
     return {"mean": s["mean_abs_error"], "wrong": s["wrong_sign_in_band_percent"], "far": s["far_wrong"],
             "phantom": s["phantom_solid"]["nodes"], "holes": s["holes"]["nodes"], "seconds": seconds,
-            "cleaned": clean}
+            "cleaned": clean, "open": j.get("candidate_open", False)}
 
 
 def score(palpa, ev, points, mesh, cells, work):
@@ -266,7 +267,8 @@ def main():
                     poisson_cells = (["n/a", "n/a", q["error"]] if "error" in q else
                                      [f"{q['mean']:.3f}", f"{q['wrong']:.2f}",
                                       f"{q['far']:,} ({q['phantom']:,}/{q['holes']:,})" +
-                                      (" (cleaned)" if q["cleaned"] else "")])
+                                      (" (cleaned)" if q["cleaned"] else "") +
+                                      (" (open mesh: winding sign)" if q["open"] else "")])
             if o3d is not None:
                 row += poisson_cells
             print("| " + " | ".join(row) + " |", flush=True)

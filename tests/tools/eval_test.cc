@@ -269,6 +269,55 @@ TEST(EvaluateCandidate, IcosphereScoresAsTheExactFieldAndAShiftedOneFails) {
 }
 
 // The CLI: --candidate-mesh scores the mesh on FIELD's grid; a mesh that is not closed is refused.
+// Issue 20: an open candidate (screened Poisson's on an open scan) is signed by its winding
+// number. The closed icosphere signed that way agrees with CGAL's side everywhere beyond half a
+// voxel; with its cap below z = -0.5 r removed, the centre and the top stay inside, the region
+// below the hole's rim (where w < 1/2) and everything far away are outside, and the distance is
+// the exact one to the faces that remain.
+TEST(TrueDistances, OpenMeshesAreSignedByTheirWindingNumber) {
+  const BlobSpec s = SphereSpec();
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
+  const blob::FieldView view = View(bytes);
+  const mesh::TriangleMesh sphere = Icosphere(4, kSphereRadiusModel);
+  auto closed = mesh::TrueDistances(view, Truth::Mesh(sphere), 3);
+  auto as_open = mesh::TrueDistances(view, Truth::OpenMesh(sphere), 3);
+  ASSERT_TRUE(closed && as_open);
+  std::size_t compared = 0;
+  for (std::size_t n = 0; n < closed->voxels.size(); ++n) {
+    if (std::abs(closed->voxels[n]) <= 0.5f) continue;
+    ASSERT_EQ(std::signbit(closed->voxels[n]), std::signbit(as_open->voxels[n])) << n;
+    ++compared;
+  }
+  EXPECT_GT(compared, 100000u);
+
+  mesh::TriangleMesh cut = sphere;
+  cut.faces.clear();
+  for (const auto& f : sphere.faces) {
+    const double z =
+        (sphere.vertices[static_cast<std::size_t>(f[0])].z() + sphere.vertices[static_cast<std::size_t>(f[1])].z() +
+         sphere.vertices[static_cast<std::size_t>(f[2])].z()) /
+        3;
+    if (z > -0.5 * kSphereRadiusModel) cut.faces.push_back(f);
+  }
+  ASSERT_FALSE(mesh::CheckClosedOriented(cut, "cut"));
+  auto open = mesh::TrueDistances(view, Truth::OpenMesh(cut), 3);
+  ASSERT_TRUE(open) << open.error().message;
+  // The node nearest the model point (0, 0, z r).
+  const auto at = [&](double z_fraction) {
+    const Eigen::Vector3d device =
+        s.fit_scale * Eigen::Vector3d(0, 0, z_fraction * kSphereRadiusModel) + s.fit_offset_m;
+    std::array<std::size_t, 3> ijk{};
+    for (int a = 0; a < 3; ++a)
+      ijk[static_cast<std::size_t>(a)] = static_cast<std::size_t>(std::lround((device[a] - s.origin_m[a]) / s.voxel_m));
+    return open->voxels[(ijk[0] * static_cast<std::size_t>(s.dims[1]) + ijk[1]) * static_cast<std::size_t>(s.dims[2]) +
+                        ijk[2]];
+  };
+  EXPECT_LT(at(0.0), 0.0f);   // the centre: w ~ 0.75
+  EXPECT_LT(at(0.7), 0.0f);   // under the top
+  EXPECT_GT(at(-0.9), 0.0f);  // below the rim's plane, inside the old sphere: w < 1/2
+  EXPECT_GT(at(1.3), 0.0f);   // above the top
+}
+
 TEST(EvalCandidateCli, CandidateMeshScoresOnTheFieldsGrid) {
   const fs::path dir = fs::path(::testing::TempDir()) / "eval_candidate";
   fs::create_directories(dir);
@@ -295,6 +344,17 @@ TEST(EvalCandidateCli, CandidateMeshScoresOnTheFieldsGrid) {
   mesh::TriangleMesh open = Icosphere(3, kSphereRadiusModel);
   open.faces.pop_back();
   std::ofstream(cand, std::ios::trunc) << ToOff(open);
+  // An open candidate (one face short) is scored, signed by its winding number, and says so;
+  // with one face gone (2-3 voxels wide) it scores near the closed one.
+  const auto opened = Palpa(fmt::format("eval {} --mesh {} --candidate-mesh {} --json", blob, truth, cand));
+  ASSERT_EQ(opened.code, 0) << opened.out;
+  EXPECT_NE(opened.out.find("signed by its generalized winding number"), std::string::npos) << opened.out;
+  const auto oj = nlohmann::json::parse(opened.out.substr(opened.out.find('{')));
+  EXPECT_TRUE(oj["candidate_open"].get<bool>());
+  EXPECT_LT(oj["score"]["mean_abs_error"].get<double>(), 0.1);
+  EXPECT_EQ(oj["score"]["far_wrong"], 0);
+  // A file that is no mesh at all is still refused, naming it.
+  std::ofstream(cand, std::ios::trunc) << "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 one\n";
   const auto refused = Palpa(fmt::format("eval {} --mesh {} --candidate-mesh {}", blob, truth, cand));
   EXPECT_EQ(refused.code, 2);
   EXPECT_NE(refused.out.find("cand.off"), std::string::npos) << refused.out;

@@ -97,6 +97,7 @@ int RunEval(const EvalArgs& args) {
   // (Evaluate refuses a wider band too; here it is refused before the truth is computed.)
   // A candidate mesh has an exact distance everywhere: FIELD lends it only its grid.
   const bool candidate = !args.candidate_mesh.empty();
+  bool candidate_open = false;
   const double exact = candidate ? args.band_voxels : mesh::ExactBandVoxels(v);
   options.band_voxels = args.band_given ? args.band_voxels : std::min(args.band_voxels, exact);
   if (options.band_voxels > exact) {
@@ -116,12 +117,25 @@ int RunEval(const EvalArgs& args) {
   const auto t1 = std::chrono::steady_clock::now();
   std::expected<mesh::EvalResult, mesh::Error> score;
   if (candidate) {
+    // An open or non-manifold candidate (screened Poisson on an open scan or on noise) is scored
+    // too, signed by its winding number; the closed path is unchanged.
     auto m = mesh::ReadClosedMesh(args.candidate_mesh);
     if (!m) {
-      fmt::print(stderr, "palpa eval: {}\n", m.error().message);
-      return kExitBadInput;
+      auto any = mesh::ReadOff(args.candidate_mesh);
+      if (!any || any->faces.empty()) {
+        fmt::print(stderr, "palpa eval: {}\n", any ? m.error().message : any.error().message);
+        return kExitBadInput;
+      }
+      fmt::print(stderr,
+                 "palpa eval: note: {} is not a closed, consistently oriented mesh ({}): signed by its generalized "
+                 "winding number\n",
+                 args.candidate_mesh, m.error().message);
+      candidate_open = true;
+      m = std::move(any);
     }
-    auto c = mesh::TrueDistances(v, mesh::Truth::Mesh(std::move(*m)), std::max(1.0, options.band_voxels));
+    auto c =
+        mesh::TrueDistances(v, candidate_open ? mesh::Truth::OpenMesh(std::move(*m)) : mesh::Truth::Mesh(std::move(*m)),
+                            std::max(1.0, options.band_voxels));
     if (!c) {
       fmt::print(stderr, "palpa eval: {}: {}\n", args.candidate_mesh, c.error().message);
       return kExitBadInput;
@@ -141,6 +155,7 @@ int RunEval(const EvalArgs& args) {
   if (args.json) {
     const nlohmann::ordered_json out = {{"field", args.field},
                                         {"candidate_mesh", args.candidate_mesh},
+                                        {"candidate_open", candidate_open},
                                         {"truth", truth_name},
                                         {"dims", {v.dims[0], v.dims[1], v.dims[2]}},
                                         {"voxel", v.voxel_m},

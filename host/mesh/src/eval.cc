@@ -1,5 +1,7 @@
 #include "palpa/mesh/eval.h"
 
+#include "palpa/field/winding.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
@@ -41,13 +43,15 @@ void SphereDistances(const blob::FieldView& f, const Truth& truth, TrueDistanceG
 }
 
 std::expected<void, Error> MeshDistances(const blob::FieldView& f, const Truth& truth, TrueDistanceGrid& out) {
-  if (auto ok = CheckClosedOriented(truth.mesh, "truth mesh"); !ok) return ok;
+  if (!truth.open) {
+    if (auto ok = CheckClosedOriented(truth.mesh, "truth mesh"); !ok) return ok;
+  }
   TriangleMesh m;  // in node index coordinates, outward
   m.faces = truth.mesh.faces;
   m.vertices.reserve(truth.mesh.vertices.size());
   for (const auto& v : truth.mesh.vertices) m.vertices.push_back(ToIndex(f, v));
-  OrientOutward(m);
-  out.mesh_in_voxels = std::make_shared<const ExactMeshDistance>(m);
+  OrientOutward(m);  // an open mesh too: its enclosed volume about any point still tells the side
+  out.mesh_in_voxels = std::make_shared<const ExactMeshDistance>(m, !truth.open);
   const ExactMeshDistance& exact = *out.mesh_in_voxels;
   const auto [nx, ny, nz] = out.dims;
   const double reach = out.exact_within_voxels;
@@ -120,10 +124,35 @@ std::expected<void, Error> MeshDistances(const blob::FieldView& f, const Truth& 
   candidates = {};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, close.size(), 64), [&](const auto& r) {
     for (std::size_t c = r.begin(); c != r.end(); ++c)
-      side[close[c]] = static_cast<std::int8_t>(exact.Side(node(close[c])));
+      side[close[c]] =
+          static_cast<std::int8_t>(truth.open ? exact.NearSide(node(close[c])) : exact.Side(node(close[c])));
   });
   for (const std::size_t n : close)
     if (side[n] == 0) side[n] = 2;  // on the surface: distance 0, any sign; 2 marks "done"
+  if (truth.open) {
+    // An open mesh does not separate inside from outside (the flood below would leak through a
+    // hole): every node farther than ½ voxel takes the side of the mesh's generalized winding
+    // number, from the fast dipole tree over its faces (centroid, area, unit normal; winding.h),
+    // accurate beyond about a face's size.
+    std::vector<Eigen::Vector3d> centres, normals;
+    std::vector<double> areas;
+    for (const auto& t : m.faces) {
+      const Eigen::Vector3d& a = m.vertices[static_cast<std::size_t>(t[0])];
+      const Eigen::Vector3d& b = m.vertices[static_cast<std::size_t>(t[1])];
+      const Eigen::Vector3d& c = m.vertices[static_cast<std::size_t>(t[2])];
+      const Eigen::Vector3d cross = (b - a).cross(c - a);
+      const double twice_area = cross.norm();
+      if (!(twice_area > 0)) continue;
+      centres.push_back((a + b + c) / 3.0);
+      normals.push_back(cross / twice_area);
+      areas.push_back(0.5 * twice_area);
+    }
+    const field::WindingNumber winding(centres, normals, areas);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, side.size(), 4096), [&](const auto& r) {
+      for (std::size_t n = r.begin(); n != r.end(); ++n)
+        if (side[n] == 0) side[n] = static_cast<std::int8_t>(winding(node(n)) > 0.5 ? -1 : 1);
+    });
+  }
   std::vector<std::size_t> queue;
   for (std::size_t seed = 0; seed < out.voxels.size(); ++seed) {
     if (side[seed] != 0) continue;
@@ -172,6 +201,12 @@ Truth Truth::Mesh(TriangleMesh mesh) {
   Truth t;
   t.kind = Kind::kMesh;
   t.mesh = std::move(mesh);
+  return t;
+}
+
+Truth Truth::OpenMesh(TriangleMesh mesh) {
+  Truth t = Mesh(std::move(mesh));
+  t.open = true;
   return t;
 }
 

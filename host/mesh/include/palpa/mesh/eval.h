@@ -33,12 +33,20 @@ struct Truth {
   Kind kind = Kind::kSphere;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  ///< sphere centre, model units
   double radius = 0;                                 ///< sphere radius, model units, > 0
-  TriangleMesh mesh;                                 ///< closed, consistently oriented
+  TriangleMesh mesh;                                 ///< closed, consistently oriented (unless open)
+  /// A candidate that is not closed or not manifold (OpenMesh): signed by its generalized
+  /// winding number instead of CGAL's Side_of_triangle_mesh (ExactMeshDistance).
+  bool open = false;
 
   /// Sphere |x − centre| − radius (model units); e.g. sphere926.pwn is radius 10 at the origin.
   static Truth Sphere(double radius, const Eigen::Vector3d& centre = Eigen::Vector3d::Zero());
   /// A closed mesh, e.g. from ReadClosedMesh (orientation is fixed up if inward).
   static Truth Mesh(TriangleMesh mesh);
+  /// Any triangle mesh, open or non-manifold (screened Poisson's on an open scan): the unsigned
+  /// distance is exact as for a closed one; the sign is -1 where its generalized winding number
+  /// (Jacobson, Kavan, Sorkine-Hornung 2013) is above 1/2, after the faces are wound outward by the
+  /// sign of their signed volume (OrientOutward), as for a closed mesh.
+  static Truth OpenMesh(TriangleMesh mesh);
 };
 
 /// True signed distance at every node of a field's grid.

@@ -19,7 +19,11 @@ namespace palpa::mesh {
 /// meaningful; self-intersections are not detected (CGAL's Side_of_triangle_mesh precondition).
 class ExactMeshDistance {
  public:
-  explicit ExactMeshDistance(const TriangleMesh& mesh);
+  /// `closed` false: any triangle mesh (open, or with non-manifold edges, whose extra faces CGAL's
+  /// Surface_mesh cannot hold and drops: DroppedFaces); Side() is then the generalized winding
+  /// number's (exact solid angles, Van Oosterom & Strackee 1983; O(F) a query), and NearSide()
+  /// the sign from the closest face's normal, for points near the surface.
+  explicit ExactMeshDistance(const TriangleMesh& mesh, bool closed = true);
   ~ExactMeshDistance();
   ExactMeshDistance(const ExactMeshDistance&) = delete;
   ExactMeshDistance& operator=(const ExactMeshDistance&) = delete;
@@ -43,6 +47,12 @@ class ExactMeshDistance {
   /// −1 strictly inside, 0 on the surface, +1 outside (CGAL::Side_of_triangle_mesh, exact
   /// predicates on the Epick kernel).
   int Side(const Eigen::Vector3d& p) const;
+  /// For a mesh built with closed = false: -1 where (p - c) . n < 0 for the closest point c and
+  /// its face's normal n, +1 where > 0, 0 on the surface. For points within a fraction of a face
+  /// of the surface, where the O(F) winding number would be too slow to ask at every node.
+  int NearSide(const Eigen::Vector3d& p) const;
+  /// Faces the Surface_mesh could not take (non-manifold), left out of every query.
+  std::size_t DroppedFaces() const;
   /// Side(p)·UnsignedDistance(p): negative inside, the convention of the field.
   double SignedDistance(const Eigen::Vector3d& p) const;
 
