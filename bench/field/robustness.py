@@ -2,9 +2,11 @@
 """Robustness table of the default field method (issue 20), with palpa's own commands:
 
     bench/field/robustness.py [--palpa build/host/host/cli/palpa] [--compare OTHER_PALPA]
-                              [--work DIR] [--cells 150] [--meshes knot1,fandisk]
+                              [--work DIR] [--cells 150] [--meshes knot1,fandisk,/path/other.off]
+                              [--rows clean,2 %] [--no-poisson]
 
-For each bundled closed mesh, `palpa sample --seed 1` draws 5,000 points, which are then perturbed
+For each closed mesh (bundled names, or paths: a mesh the project has never seen is the honest
+test; `--rows` keeps only some inputs), `palpa sample --seed 1` draws 5,000 points, which are then perturbed
 as in the issue's table (fewer samples; Gaussian position noise of 0.5 and 1 voxel per axis;
 normal noise, each normal turned by |N(0, 15 deg)| about a random tangent axis; 2 % outliers,
 uniform in the bounding box with random normals; one stray point 8 voxels outside the surface;
@@ -224,7 +226,10 @@ def main():
     ap.add_argument("--eval-palpa", help="palpa binary for eval/export (default --palpa)")
     ap.add_argument("--work", default="build/robustness")
     ap.add_argument("--cells", type=int, default=150)
-    ap.add_argument("--meshes", default="knot1,fandisk,sphere")
+    ap.add_argument("--meshes", default="knot1,fandisk,sphere",
+                    help="bundled mesh names (data/NAME.off) or paths to closed .off meshes, comma-separated")
+    ap.add_argument("--rows", help="only the inputs whose label starts with one of these, comma-separated "
+                    "(e.g. clean,2 %%)")
     ap.add_argument("--depth", type=int, default=9, help="screened Poisson octree depth")
     ap.add_argument("--no-poisson", action="store_true", help="skip the screened Poisson column")
     args = ap.parse_args()
@@ -238,7 +243,8 @@ def main():
         + " |")
     print("|---|---|" + "---|---|---|---|" * len(cols) + ("" if o3d is None else "---|---|---|"))
     for name in args.meshes.split(","):
-        mesh = f"data/{name}.off"
+        mesh = name if name.endswith(".off") else f"data/{name}.off"
+        name = os.path.splitext(os.path.basename(mesh))[0]
         base = os.path.join(args.work, f"{name}-5000.xyz")
         run(args.palpa, "sample", mesh, "-n", "5000", "--seed", "1", "-o", base, "-q")
         pts = read_xyz(base)
@@ -249,12 +255,14 @@ def main():
         voxel = info["voxel"] / info["fit_scale"]
         rows = perturbations(pts, voxel)
         # Virtual range scans (palpa sample --views): open, occluded, with and without range noise.
-        for noise in (0.0, 0.5):
+        for noise in (0.0, 0.5) if not args.rows or "range" in args.rows else ():
             scan = os.path.join(args.work, f"{name}-scan-{noise}.xyz")
             run(args.palpa, "sample", mesh, "-n", "5000", "--seed", "1", "--views", "6", "--range-noise",
                 repr(noise * voxel), "-o", scan, "-q")
             rows.append((f"range scan, 6 views" + (f", range noise {noise} voxel" if noise else ""), read_xyz(scan)))
         for label, p in rows:
+            if args.rows and not any(label.startswith(r) for r in args.rows.split(",")):
+                continue
             path = os.path.join(args.work, f"{name}-{label.replace(' ', '_')}.xyz")
             write_xyz(path, p)
             row = [name, label]

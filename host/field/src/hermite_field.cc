@@ -37,6 +37,11 @@ constexpr int kBlendPatches = 4;
 constexpr int kAreaNeighbours = 16;
 constexpr float kWindingSure = 0.3f;    // w below (1 - above) this at all 8 brick corners: sure
 constexpr float kClampedSlack = 1e-3f;  // a node this close to +-band was clamped
+// The local estimate is trusted this close to a sample (the larger of the two); beyond, a clear
+// winding number decides the side (LabelByWinding).
+constexpr double kTrustVoxels = 2.5;
+constexpr double kTrustSpacings = 1.0;
+constexpr double kWindingClear = 0.2;
 // Samples considered per 8^3 brick: the nearest to its centre. They hold every node's few nearest
 // samples, and their balls form the bracket (any subset of the balls gives valid bounds).
 constexpr std::size_t kBrickCandidates = 48;
@@ -732,6 +737,59 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     flipped += local;
   });
   st.winding_flipped_nodes = flipped.load();
+  // Farther than kTrustSpacings sample spacings (and kTrustVoxels) from every sample, the local
+  // estimate is an extrapolation of a few patches and balls: on a thin or sparsely sampled part
+  // it makes phantom solid or holes 10-25 voxels out (unseen closed meshes, 5,000 samples), with
+  // values well inside the band, which the clamped test above never sees. There, a clear w
+  // (|w - 1/2| > kWindingClear at the node itself) decides the side, and the distance to the
+  // nearest sample bounds the magnitude (the surface passes through the samples).
+  const std::vector<double> spacing = SampleSpacing(positions);
+  std::vector<double> sorted_spacing = spacing;
+  std::nth_element(sorted_spacing.begin(),
+                   sorted_spacing.begin() + static_cast<std::ptrdiff_t>(sorted_spacing.size() / 2),
+                   sorted_spacing.end());
+  const double trust = std::max(kTrustVoxels * h, kTrustSpacings * sorted_spacing[sorted_spacing.size() / 2]);
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  std::atomic<std::size_t> far_flipped{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
+    std::size_t local = 0;
+    for (std::size_t m = r.begin(); m != r.end(); ++m) {
+      const std::size_t b = evaluated[m];
+      const std::array<float, 8> cw = corners(b);
+      const std::size_t bi = b / plane_bricks;
+      const std::size_t bj = (b / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1]);
+      const std::size_t bk = b % static_cast<std::size_t>(bd[2]);
+      float* values = field.BrickValues(b);
+      for (int a = 0; a < kB; ++a)
+        for (int c = 0; c < kB; ++c)
+          for (int e = 0; e < kB; ++e) {
+            float& x = values[(a * kB + c) * kB + e];
+            // Trilinear w from the brick corners: a cheap first filter (exact w below).
+            const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB, t = static_cast<float>(e) / kB;
+            float wi = 0.0f;
+            for (int q = 0; q < 8; ++q)
+              wi += cw[static_cast<std::size_t>(q)] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v) *
+                    ((q & 1) != 0 ? t : 1.0f - t);
+            if ((wi >= 0.5f) == (x <= 0.0f)) continue;
+            const V3 p = grid.origin_m + h * V3(static_cast<double>(bi * kB + static_cast<std::size_t>(a)),
+                                                static_cast<double>(bj * kB + static_cast<std::size_t>(c)),
+                                                static_cast<double>(bk * kB + static_cast<std::size_t>(e)));
+            std::size_t idx = 0;
+            double d2 = 0.0;
+            tree.knnSearch(p.data(), 1, &idx, &d2);
+            const double ds = std::sqrt(d2);
+            if (ds <= trust) continue;
+            const double w = winding(p);
+            if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
+            const float mag = std::min(band, static_cast<float>(ds / h));
+            x = w >= 0.5 ? -mag : mag;
+            ++local;
+          }
+    }
+    far_flipped += local;
+  });
+  st.winding_far_nodes = far_flipped.load();
   // No inside node on a grid face: the object must be closed inside the grid (an open scan's
   // side, a stray sample near the edge). A face node at or below 0 is set outside; the Lipschitz
   // projection then puts the surface within a voxel of the face.

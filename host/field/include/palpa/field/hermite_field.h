@@ -63,6 +63,7 @@ struct HermiteStats {
   std::size_t label_minority_votes = 0;   // winding_labels = false only: LabelUnallocatedBricks' minority
   std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
+  std::size_t winding_far_nodes = 0;      // evaluated nodes far from every sample given w's side
   std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
   // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
   // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
