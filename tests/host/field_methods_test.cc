@@ -178,6 +178,8 @@ TEST(HermiteTargets, CowHasNoWrongSignFarFromTheSurface) {
   EXPECT_EQ(r.far_wrong(), 0u) << r.phantom_solid.nodes << " phantom, " << r.holes.nodes << " holes";
   EXPECT_GT(c.built.hermite.winding_far_nodes, 0u);
   EXPECT_FALSE(c.built.orientation.Inconsistent()) << c.built.orientation.Describe();  // exact mesh normals
+  // Closed: not reported open (its phantoms once reached the grid faces, w a few hundredths there).
+  EXPECT_EQ(c.built.hermite.face_nodes_closed, 0u);
 }
 
 // --- Determinism ---------------------------------------------------------------------------

@@ -395,3 +395,76 @@ TEST(FindWindingOutliers, AFlippedNormalIsAnOutlier) {
 
 }  // namespace
 }  // namespace palpa::field
+
+// --- SmoothNoisyPositions (issue 20: position noise) -------------------------------------------
+
+namespace palpa::field {
+namespace {
+
+// Distance to the surface of the cube [-1, 1]^3 (exact for points near it, inside or out).
+double CubeDistance(const V3& p) {
+  const V3 q = p.cwiseAbs() - V3::Ones();
+  const double outside = q.cwiseMax(0.0).norm();
+  const double inside = std::min(q.maxCoeff(), 0.0);
+  return std::abs(outside + inside);
+}
+
+TEST(SmoothNoisyPositions, MeasuresTheNoiseAndAveragesItOnASphere) {
+  Oriented sphere = Sphere(8000, 1.0);
+  const double sigma = 0.01;  // ~ a third of the sample spacing (0.04)
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  for (V3& p : sphere.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  const auto rms_radial = [&] {
+    double s = 0.0;
+    for (const V3& p : sphere.positions) s += (p.norm() - 1.0) * (p.norm() - 1.0);
+    return std::sqrt(s / static_cast<double>(sphere.positions.size()));
+  };
+  const double before = rms_radial();
+  EXPECT_NEAR(before, sigma, 0.1 * sigma);
+  const NoiseSmoothing done = SmoothNoisyPositions(sphere.positions, sphere.normals, 48, 0.5 * sigma);
+  ASSERT_TRUE(done.Applied());
+  EXPECT_NEAR(done.noise, sigma, 0.2 * sigma);  // the residual of 16-neighbour quadrics, dof-corrected
+  EXPECT_EQ(done.moved, sphere.positions.size());
+  EXPECT_LT(rms_radial(), before / 3.0);  // 48 neighbours, twice: sigma / sqrt(48) ideally
+}
+
+TEST(SmoothNoisyPositions, LeavesCleanSamplesAlone) {
+  Oriented sphere = Sphere(2000, 1.0);
+  const std::vector<V3> before = sphere.positions;
+  const NoiseSmoothing done = SmoothNoisyPositions(sphere.positions, sphere.normals, 48, 1e-3);
+  EXPECT_FALSE(done.Applied());
+  EXPECT_LT(done.noise, 1e-4);  // a sphere is a quadric to this order at 16 neighbours
+  EXPECT_EQ(sphere.positions, before);
+}
+
+TEST(SmoothNoisyPositions, KeepsTheEdgesOfANoisyCubeSharp) {
+  Oriented cube = Cube(40);  // spacing 0.05
+  const double sigma = 0.015;
+  std::mt19937_64 rng(6);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  for (V3& p : cube.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  const auto rms = [&](bool near_edge) {
+    double s = 0.0;
+    std::size_t count = 0;
+    for (const V3& p : cube.positions) {
+      const V3 a = p.cwiseAbs();
+      // Near an edge: two coordinates within 2 spacings of the faces.
+      const int close = (a.x() > 0.9) + (a.y() > 0.9) + (a.z() > 0.9);
+      if ((close >= 2) != near_edge) continue;
+      s += CubeDistance(p) * CubeDistance(p);
+      ++count;
+    }
+    return std::sqrt(s / static_cast<double>(count));
+  };
+  const double edge_before = rms(true), face_before = rms(false);
+  const NoiseSmoothing done = SmoothNoisyPositions(cube.positions, cube.normals, 48, 0.5 * sigma);
+  ASSERT_TRUE(done.Applied());
+  // Only neighbours of the same face are fitted: a fit across the edge would round it and pull
+  // the samples near it off both faces (CGAL's jet_smooth_point_set does).
+  EXPECT_LT(rms(false), face_before / 3.0);
+  EXPECT_LT(rms(true), edge_before / 2.0);
+}
+
+}  // namespace
+}  // namespace palpa::field

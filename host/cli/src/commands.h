@@ -31,6 +31,7 @@ struct BuildArgs {
   bool quiet = false;
   bool strict = false;           ///< refuse degenerate samples instead of dropping them (issue 20)
   std::string normals = "keep";  ///< keep | orient | estimate (field::NormalsMode, issue 20)
+  std::string denoise = "auto";  ///< auto | off (field::SmoothNoisyPositions, issue 20)
 };
 int RunBuild(const BuildArgs& args);
 

@@ -64,6 +64,12 @@ int main(int argc, char** argv) {
                    "without normals (x y z lines, PLY without nx ny nz) is always estimated")
       ->capture_default_str()
       ->check(CLI::IsMember({"keep", "orient", "estimate"}));
+  build
+      ->add_option("--denoise", b.denoise,
+                   "auto: when the samples' position noise exceeds a quarter voxel RMS, move each onto the quadric "
+                   "fitted to its 48 nearest samples with agreeing normals (default); off: never")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "off"}));
   build->add_flag("--strict", b.strict,
                   "Refuse a point file with any zero-length or non-finite normal or exact duplicate (default: "
                   "drop them and say so)");

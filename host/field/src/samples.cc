@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <vector>
@@ -315,6 +316,110 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
       out.worst_jump = jump[i];
     }
   }
+  return out;
+}
+
+namespace {
+
+constexpr double kMaxMoveNoise = 2.5;
+
+// One pass of SmoothNoisyPositions; `cap` bounds each move (the first pass's noise; infinite on it).
+NoiseSmoothing SmoothingPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
+                             std::size_t neighbours, double threshold, double cap) {
+  constexpr double kAgreeCos = 0.8;
+  constexpr int kMinFit = 8;
+  // The noise is measured on small neighbourhoods, where a smooth surface is a quadric to well
+  // below a voxel (coarse or faceted samples included) and only noise is left in the residual.
+  constexpr std::size_t kNoiseNeighbours = 16;
+  NoiseSmoothing out;
+  const std::size_t n = positions.size();
+  if (n <= neighbours || normals.size() != n || neighbours < kMinFit) return out;
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  std::vector<double> height(n, 0.0), residual(n, -1.0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+    std::vector<std::size_t> idx(neighbours + 1);
+    std::vector<double> d2(neighbours + 1);
+    using M6 = Eigen::Matrix<double, 6, 6>;
+    using V6 = Eigen::Matrix<double, 6, 1>;
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const Eigen::Vector3d& p = positions[i];
+      const Eigen::Vector3d& nrm = normals[i];
+      const std::size_t got = tree.knnSearch(p.data(), neighbours + 1, idx.data(), d2.data());
+      const double scale = std::sqrt(d2[got - 1]);  // u, v, z in units of the neighbourhood
+      if (!(scale > 0)) continue;
+      const Eigen::Vector3d axis = std::abs(nrm.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+      const Eigen::Vector3d t1 = axis.cross(nrm).normalized();
+      const Eigen::Vector3d t2 = nrm.cross(t1);
+      // Fit over the first `count` neighbours (nearest first): {height at P, RMS residual}, or
+      // {0, -1} with too few agreeing normals.
+      const auto fit = [&](std::size_t count) -> std::pair<double, double> {
+        M6 m = M6::Zero();
+        V6 rhs = V6::Zero();
+        int used = 0;
+        for (std::size_t a = 0; a < count; ++a) {  // the sample itself included
+          if (normals[idx[a]].dot(nrm) < kAgreeCos) continue;
+          const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
+          const double u = d.dot(t1), v = d.dot(t2);
+          V6 row;
+          row << 1, u, v, u * u, u * v, v * v;
+          m += row * row.transpose();
+          rhs += row * d.dot(nrm);
+          ++used;
+        }
+        if (used < kMinFit + 1) return {0.0, -1.0};
+        m.diagonal().array() += 1e-9;
+        const V6 c = m.ldlt().solve(rhs);
+        if (!c.allFinite()) return {0.0, -1.0};
+        double sum2 = 0.0;
+        for (std::size_t a = 0; a < count; ++a) {
+          if (normals[idx[a]].dot(nrm) < kAgreeCos) continue;
+          const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
+          const double u = d.dot(t1), v = d.dot(t2);
+          const double e = d.dot(nrm) - (c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v);
+          sum2 += e * e;
+        }
+        // Least squares leaves (used - 6) / used of the noise's variance in the residuals.
+        return {c[0] * scale, std::sqrt(sum2 / std::max(used - 6, 1)) * scale};
+      };
+      residual[i] = fit(std::min(got, kNoiseNeighbours + 1)).second;
+      height[i] = fit(got).first;
+    }
+  });
+  std::vector<double> fitted;
+  fitted.reserve(n);
+  for (const double x : residual)
+    if (x >= 0) fitted.push_back(x);
+  if (fitted.empty()) return out;
+  std::nth_element(fitted.begin(), fitted.begin() + static_cast<std::ptrdiff_t>(fitted.size() / 2), fitted.end());
+  out.noise = fitted[fitted.size() / 2];
+  if (!(out.noise > threshold)) return out;
+  const double noise = std::min(out.noise, cap);
+  double total = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (residual[i] < 0) continue;
+    // A move beyond kMaxMoveNoise x the noise is the shape (a detail finer than the fit), not noise.
+    positions[i] += std::clamp(height[i], -kMaxMoveNoise * noise, kMaxMoveNoise * noise) * normals[i];
+    total += std::abs(height[i]);
+    ++out.moved;
+  }
+  out.mean_move = out.moved > 0 ? total / static_cast<double>(out.moved) : 0.0;
+  return out;
+}
+
+}  // namespace
+
+NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
+                                    const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
+                                    double threshold, int passes) {
+  const std::vector<Eigen::Vector3d> before = positions;
+  NoiseSmoothing out =
+      SmoothingPass(positions, normals, neighbours, threshold, std::numeric_limits<double>::infinity());
+  if (!out.Applied()) return out;
+  for (int pass = 1; pass < passes; ++pass) SmoothingPass(positions, normals, neighbours, -1.0, out.noise);
+  double total = 0.0;
+  for (std::size_t i = 0; i < positions.size(); ++i) total += (positions[i] - before[i]).norm();
+  out.mean_move = total / static_cast<double>(out.moved);
   return out;
 }
 
