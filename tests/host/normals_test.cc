@@ -29,13 +29,9 @@ struct Oriented {
 // n points on a sphere (Fibonacci lattice), radius r about c; only those with z >= z_min / r.
 Oriented Sphere(std::size_t n, double r, const V3& c = V3::Zero(), double z_min = -2.0) {
   Oriented out;
-  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
   for (std::size_t i = 0; i < n; ++i) {
-    const double z = 1.0 - 2.0 * (static_cast<double>(i) + 0.5) / static_cast<double>(n);
-    const double rho = std::sqrt(1.0 - z * z);
-    const double t = golden * static_cast<double>(i);
-    const V3 u(rho * std::cos(t), rho * std::sin(t), z);
-    if (z < z_min) continue;
+    const V3 u = testing::FibonacciPoint(i, n);
+    if (u.z() < z_min) continue;
     out.positions.push_back(c + r * u);
     out.normals.push_back(u);
   }

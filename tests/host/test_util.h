@@ -1,16 +1,30 @@
 // Helpers shared by the palpa_field tests.
 #pragma once
 
+#include <cmath>
+#include <cstddef>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <gtest/gtest.h>
+#include <Eigen/Core>
 
 namespace palpa::field::testing {
 
 inline std::filesystem::path DataFile(std::string_view name) { return std::filesystem::path(PALPA_DATA_DIR) / name; }
+
+// Point i of n on the unit sphere (Fibonacci lattice: near-uniform); it is also the outward normal.
+inline Eigen::Vector3d FibonacciPoint(std::size_t i, std::size_t n) {
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  const double z = 1.0 - 2.0 * (static_cast<double>(i) + 0.5) / static_cast<double>(n);
+  const double rho = std::sqrt(1.0 - z * z);
+  const double t = golden * static_cast<double>(i);
+  return {rho * std::cos(t), rho * std::sin(t), z};
+}
 
 // A file under the test temp dir that is removed when the object goes out of scope.
 class TempFile {

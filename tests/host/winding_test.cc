@@ -18,12 +18,8 @@ using V3 = Eigen::Vector3d;
 
 // n points on the sphere of radius r (Fibonacci lattice: near-uniform), outward normals.
 void FibonacciSphere(std::size_t n, double r, std::vector<V3>& p, std::vector<V3>& nrm) {
-  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
   for (std::size_t i = 0; i < n; ++i) {
-    const double z = 1.0 - 2.0 * (static_cast<double>(i) + 0.5) / static_cast<double>(n);
-    const double rho = std::sqrt(1.0 - z * z);
-    const double t = golden * static_cast<double>(i);
-    const V3 u(rho * std::cos(t), rho * std::sin(t), z);
+    const V3 u = testing::FibonacciPoint(i, n);
     p.push_back(r * u);
     nrm.push_back(u);
   }
