@@ -262,6 +262,24 @@ TEST_F(Cli, OpenScanIsReportedOpen) {
   EXPECT_EQ(closed.out.find("open"), std::string::npos) << closed.out;
 }
 
+// Issue 20: a range scan from one view (exact normals) is open, and its points farthest from the
+// scanner face it, which the closed-surface support test read as inward normals (knot1: 4 of 26
+// directions, cow: 9). It is reported open, not inconsistent; cube.pwn, whose normals really are
+// half inward (all along +x, +y or +z), still is.
+TEST_F(Cli, OneViewRangeScanIsOpenNotInconsistent) {
+  const std::string mesh = std::string(PALPA_DATA_DIR) + "/knot1.off";
+  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 1 --views 1 -o " + Path("view.xyz") + " -q").code, 0);
+  const Outcome b = Palpa("build " + Path("view.xyz") + " -o " + Path("view.palpa") + " --cells 150 -q");
+  ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_NE(b.out.find("the scan is open (the normals are not to blame)"), std::string::npos) << b.out;
+  EXPECT_EQ(b.out.find("not consistently oriented"), std::string::npos) << b.out;
+  const Outcome cube =
+      Palpa("build " + std::string(PALPA_DATA_DIR) + "/cube.pwn -o " + Path("cube.palpa") + " --cells 100 -q");
+  ASSERT_EQ(cube.code, 0) << cube.out;
+  EXPECT_NE(cube.out.find("not consistently oriented"), std::string::npos) << cube.out;
+  EXPECT_NE(cube.out.find("Rerun with --normals orient"), std::string::npos) << cube.out;
+}
+
 TEST_F(Cli, FailedBuildKeepsThePreviousOutput) {
   const std::string out = Path("field.palpa");
   ASSERT_EQ(Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + out + " --cells 40 -q").code, 0);

@@ -249,9 +249,14 @@ int RunBuild(const BuildArgs& args) {
     }
     built = std::move(*result);
   }
+  // Issue 20: say when the scan is open (the winding number closed a surface where no sample
+  // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
+  const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+  const bool open_scan = built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0;
   // Every method takes the inside from the normals' sign; say so when the file's normals disagree
-  // (also with -q: the field is then wrong near those points).
-  if (built.orientation.Inconsistent()) {
+  // (also with -q: the field is then wrong near those points). An open scan's far side is no
+  // evidence (OrientationReport::OpenScanInconsistent).
+  if (open_scan ? built.orientation.OpenScanInconsistent() : built.orientation.Inconsistent()) {
     fmt::print(stderr,
                "palpa build: warning: {}: normals are not consistently oriented: {}. Normals must point out of the "
                "object; the field is wrong near these points.{}\n",
@@ -260,22 +265,15 @@ int RunBuild(const BuildArgs& args) {
                    ? " Rerun with --normals orient to re-choose their signs, or --normals estimate to replace them."
                    : "");
   }
-
-  // Issue 20: say when the scan is open (the winding number closed a surface where no sample
-  // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
-  {
-    const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+  if (open_scan) {
     const double closed = built.hermite.closed_area_m2 / (transform.scale * transform.scale);  // model units^2
-    if (built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0) {
-      fmt::print(
-          stderr,
-          "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it by the "
-          "winding number of the samples over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
-          args.points, built.hermite.closed_area_m2 * 1e6, closed,
-          built.hermite.face_nodes_closed > 0
-              ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
-              : std::string());
-    }
+    fmt::print(stderr,
+               "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it by the "
+               "winding number of the samples over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
+               args.points, built.hermite.closed_area_m2 * 1e6, closed,
+               built.hermite.face_nodes_closed > 0
+                   ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
+                   : std::string());
   }
   const field::GridSpec& g = built.field.grid();
   blob::BlobMeta meta;
