@@ -233,8 +233,7 @@ int RunBuild(const BuildArgs& args) {
         fmt::print(stderr,
                    "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved onto the "
                    "quadric of their {} nearest samples with agreeing normals (twice), {:.2f} voxels on average "
-                   "(--denoise off "
-                   "keeps them)\n",
+                   "(--denoise off keeps them)\n",
                    args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, kDenoiseNeighbours,
                    smoothed.mean_move / h);
     }

@@ -625,8 +625,9 @@ namespace {
 // each node, the first-order distance to that level set (central differences over 1 voxel),
 // clamped to the band; the Lipschitz projection then bounds it like any other value. So the
 // closing surface is smooth, never a staircase of brick faces.
+// `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
-                    HermiteStats& st) {
+                    const KdTree& tree, const std::vector<double>& spacing, HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -744,14 +745,14 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // values well inside the band, which the clamped test above never sees. There, a clear w
   // (|w - 1/2| > kWindingClear at the node itself) decides the side, and the distance to the
   // nearest sample bounds the magnitude (the surface passes through the samples).
-  const std::vector<double> spacing = SampleSpacing(positions);
+  const auto on_grid_face = [&](int i, int j, int k) {
+    return i == 0 || j == 0 || k == 0 || i == grid.dims[0] - 1 || j == grid.dims[1] - 1 || k == grid.dims[2] - 1;
+  };
   std::vector<double> sorted_spacing = spacing;
   std::nth_element(sorted_spacing.begin(),
                    sorted_spacing.begin() + static_cast<std::ptrdiff_t>(sorted_spacing.size() / 2),
                    sorted_spacing.end());
   const double trust = std::max(kTrustVoxels * h, kTrustSpacings * sorted_spacing[sorted_spacing.size() / 2]);
-  const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
@@ -790,11 +791,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             // closing surface w is still a tenth or more there (a thin open plate cut by its grid:
             // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
             // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
-            const std::size_t fi = bi * kB + static_cast<std::size_t>(a), fj = bj * kB + static_cast<std::size_t>(c),
-                              fk = bk * kB + static_cast<std::size_t>(e);
-            if (w >= kOpenFaceWinding &&
-                (fi == 0 || fj == 0 || fk == 0 || fi + 1 == static_cast<std::size_t>(grid.dims[0]) ||
-                 fj + 1 == static_cast<std::size_t>(grid.dims[1]) || fk + 1 == static_cast<std::size_t>(grid.dims[2])))
+            if (w >= kOpenFaceWinding && on_grid_face(static_cast<int>(bi) * kB + a, static_cast<int>(bj) * kB + c,
+                                                      static_cast<int>(bk) * kB + e))
               ++face_local;
           }
     }
@@ -820,7 +818,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             for (int e = 0; e < kB; ++e) {
               const int i = bi * kB + a, j = bj * kB + c, k = bk * kB + e;
               if (i >= dims[0] || j >= dims[1] || k >= dims[2]) continue;
-              if (i != 0 && j != 0 && k != 0 && i != dims[0] - 1 && j != dims[1] - 1 && k != dims[2] - 1) continue;
+              if (!on_grid_face(i, j, k)) continue;
               float& x = values[(a * kB + c) * kB + e];
               if (x > 0.0f) continue;
               x = band;
@@ -1032,7 +1030,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   st.seconds_evaluate = SecondsSince(phase);
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
-    LabelByWinding(field, positions, normals, st);
+    LabelByWinding(field, positions, normals, tree, spacing, st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }

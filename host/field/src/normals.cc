@@ -138,18 +138,6 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
   });
 }
 
-std::string_view NormalsModeName(NormalsMode mode) {
-  switch (mode) {
-    case NormalsMode::kKeep:
-      return "keep";
-    case NormalsMode::kOrient:
-      return "orient";
-    case NormalsMode::kEstimate:
-      return "estimate";
-  }
-  return "keep";
-}
-
 std::string NormalsReport::Describe() const {
   std::string what =
       estimated > 0

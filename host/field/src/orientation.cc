@@ -34,10 +34,9 @@ using detail::PointCloud;
 
 }  // namespace
 
-bool OrientationReport::Inconsistent() const { return inward_support_directions > 0 || PairsInconsistent(); }
-
-bool OrientationReport::PairsInconsistent() const {
-  return static_cast<double>(flipped_flat_pairs) > kFlippedFraction * static_cast<double>(flat_pairs);
+bool OrientationReport::Inconsistent() const {
+  return inward_support_directions > 0 ||
+         static_cast<double>(flipped_flat_pairs) > kFlippedFraction * static_cast<double>(flat_pairs);
 }
 
 bool OrientationReport::OpenScanInconsistent() const {

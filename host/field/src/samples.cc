@@ -395,16 +395,13 @@ NoiseSmoothing SmoothingPass(std::vector<Eigen::Vector3d>& positions, const std:
   out.noise = fitted[fitted.size() / 2];
   if (!(out.noise > threshold)) return out;
   const double noise = std::min(out.noise, cap);
-  double total = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     if (residual[i] < 0) continue;
     // A move beyond kMaxMoveNoise x the noise is the shape (a detail finer than the fit), not noise.
     positions[i] += std::clamp(height[i], -kMaxMoveNoise * noise, kMaxMoveNoise * noise) * normals[i];
-    total += std::abs(height[i]);
     ++out.moved;
   }
-  out.mean_move = out.moved > 0 ? total / static_cast<double>(out.moved) : 0.0;
-  return out;
+  return out;  // mean_move: SmoothNoisyPositions, over all passes
 }
 
 }  // namespace

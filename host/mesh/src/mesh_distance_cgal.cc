@@ -29,10 +29,7 @@ Point ToPoint(const Eigen::Vector3d& p) { return {p.x(), p.y(), p.z()}; }
 struct ExactMeshDistance::Impl {
   Surface surface;
   Tree tree;
-  std::unique_ptr<SideOf> side;           // closed meshes only
-  std::vector<Eigen::Vector3d> vertices;  // open meshes: the winding number's faces
-  std::vector<std::array<int, 3>> faces;
-  std::size_t dropped = 0;
+  std::unique_ptr<SideOf> side;  // closed meshes only
 };
 
 ExactMeshDistance::ExactMeshDistance(const TriangleMesh& mesh, bool closed) : impl_(std::make_unique<Impl>()) {
@@ -40,20 +37,12 @@ ExactMeshDistance::ExactMeshDistance(const TriangleMesh& mesh, bool closed) : im
   std::vector<Surface::Vertex_index> v;
   v.reserve(mesh.vertices.size());
   for (const auto& p : mesh.vertices) v.push_back(s.add_vertex(ToPoint(p)));
-  for (const auto& f : mesh.faces) {
-    const auto added = s.add_face(v[static_cast<std::size_t>(f[0])], v[static_cast<std::size_t>(f[1])],
-                                  v[static_cast<std::size_t>(f[2])]);
-    if (added == Surface::null_face()) ++impl_->dropped;
-  }
+  for (const auto& f : mesh.faces)
+    s.add_face(v[static_cast<std::size_t>(f[0])], v[static_cast<std::size_t>(f[1])], v[static_cast<std::size_t>(f[2])]);
   impl_->tree.insert(faces(s).first, faces(s).second, s);
   impl_->tree.build();
   impl_->tree.accelerate_distance_queries();
-  if (closed) {
-    impl_->side = std::make_unique<SideOf>(impl_->tree);
-  } else {
-    impl_->vertices = mesh.vertices;
-    impl_->faces = mesh.faces;
-  }
+  if (closed) impl_->side = std::make_unique<SideOf>(impl_->tree);
   // Any lazily built search structure is built now, on one thread, before concurrent queries.
   if (!mesh.vertices.empty()) (void)impl_->tree.closest_point(ToPoint(mesh.vertices[0]));
 }
@@ -93,27 +82,13 @@ int ExactMeshDistance::NearSide(const Eigen::Vector3d& p) const {
   return d < 0 ? -1 : d > 0 ? 1 : 0;
 }
 
-std::size_t ExactMeshDistance::DroppedFaces() const { return impl_->dropped; }
-
 Eigen::Vector3d ExactMeshDistance::AnySurfacePoint() const {
   const Point& v = impl_->surface.point(*impl_->surface.vertices().begin());
   return {v.x(), v.y(), v.z()};
 }
 
 int ExactMeshDistance::Side(const Eigen::Vector3d& p) const {
-  if (!impl_->side) {
-    // Generalized winding number: the signed solid angles of all faces (Van Oosterom & Strackee
-    // 1983: tan(omega / 2) = a . (b x c) / (|a||b||c| + (a . b)|c| + (b . c)|a| + (c . a)|b|)).
-    double omega = 0;
-    for (const auto& f : impl_->faces) {
-      const Eigen::Vector3d a = impl_->vertices[static_cast<std::size_t>(f[0])] - p;
-      const Eigen::Vector3d b = impl_->vertices[static_cast<std::size_t>(f[1])] - p;
-      const Eigen::Vector3d c = impl_->vertices[static_cast<std::size_t>(f[2])] - p;
-      const double la = a.norm(), lb = b.norm(), lc = c.norm();
-      omega += 2.0 * std::atan2(a.dot(b.cross(c)), la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb);
-    }
-    return omega / (4.0 * CGAL_PI) > 0.5 ? -1 : 1;
-  }
+  if (!impl_->side) return NearSide(p);  // open: no inside to decide; eval signs far nodes by w
   switch ((*impl_->side)(ToPoint(p))) {
     case CGAL::ON_BOUNDED_SIDE:
       return -1;

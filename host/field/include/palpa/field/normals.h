@@ -25,7 +25,6 @@
 
 #include <cstddef>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -37,9 +36,6 @@ enum class NormalsMode {
   kOrient,    ///< keep the normals' lines, choose their signs (Hoppe MST + global sign)
   kEstimate,  ///< estimate the lines (jet fit), then orient
 };
-
-/// "keep", "orient", "estimate".
-std::string_view NormalsModeName(NormalsMode mode);
 
 struct NormalsReport {
   std::size_t estimated = 0;        ///< normals estimated (estimate, or a file without normals)

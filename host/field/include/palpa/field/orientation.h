@@ -31,8 +31,6 @@ struct OrientationReport {
   // True when either test finds inconsistency: any inward support direction, or flipped pairs
   // above 1 % of the flat pairs (a few can come from noise on thin, noisy sheets).
   bool Inconsistent() const;
-  // The flat-pair test alone: neighbours on one sheet with opposite normals above 1 %.
-  bool PairsInconsistent() const;
   // For an open scan (issue 20): the support test assumes a closed surface, and on a scan seen
   // from one side the farthest points away from the scanner face it, inward by that test. True
   // only with more than 9 of the 26 directions inward (the far side of one view) or flipped

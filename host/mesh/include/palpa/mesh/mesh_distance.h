@@ -20,9 +20,9 @@ namespace palpa::mesh {
 class ExactMeshDistance {
  public:
   /// `closed` false: any triangle mesh (open, or with non-manifold edges, whose extra faces CGAL's
-  /// Surface_mesh cannot hold and drops: DroppedFaces); Side() is then the generalized winding
-  /// number's (exact solid angles, Van Oosterom & Strackee 1983; O(F) a query), and NearSide()
-  /// the sign from the closest face's normal, for points near the surface.
+  /// Surface_mesh cannot hold and leaves out); Side() is then NearSide(), the sign from the closest
+  /// face's normal, meaningful near the surface only (eval signs the rest by the mesh's winding
+  /// number, field::WindingNumber over its faces).
   explicit ExactMeshDistance(const TriangleMesh& mesh, bool closed = true);
   ~ExactMeshDistance();
   ExactMeshDistance(const ExactMeshDistance&) = delete;
@@ -45,14 +45,12 @@ class ExactMeshDistance {
   };
   std::optional<RayHit> FirstHit(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir) const;
   /// −1 strictly inside, 0 on the surface, +1 outside (CGAL::Side_of_triangle_mesh, exact
-  /// predicates on the Epick kernel).
+  /// predicates on the Epick kernel); NearSide() for a mesh built with closed = false.
   int Side(const Eigen::Vector3d& p) const;
   /// For a mesh built with closed = false: -1 where (p - c) . n < 0 for the closest point c and
   /// its face's normal n, +1 where > 0, 0 on the surface. For points within a fraction of a face
-  /// of the surface, where the O(F) winding number would be too slow to ask at every node.
+  /// of the surface, where the winding number of the faces is not accurate.
   int NearSide(const Eigen::Vector3d& p) const;
-  /// Faces the Surface_mesh could not take (non-manifold), left out of every query.
-  std::size_t DroppedFaces() const;
   /// Side(p)·UnsignedDistance(p): negative inside, the convention of the field.
   double SignedDistance(const Eigen::Vector3d& p) const;
 
