@@ -202,6 +202,34 @@ TEST(FieldMethods, OneAndTwoThreadsGiveBitIdenticalPayloads) {
   }
 }
 
+// palpa build encodes v2 from the sparse field a brick at a time (SparseField::BrickQ16): the same
+// blob as the dense payload (WriteQ16) gives, and the same values node by node (ValueQ16).
+TEST(FieldMethods, BrickWiseBlobEqualsTheDensePayloadsBlob) {
+  const auto points = ReadPoints(DataFile("kitten.xyz"));
+  ASSERT_TRUE(points.has_value());
+  const Case c = Build(*points, 90, FieldMethod::kHermite);
+  const SparseField& field = c.built.field;
+  const GridSpec& g = field.grid();
+  std::vector<std::int32_t> dense(g.NodeCount());
+  field.WriteQ16(dense);
+  blob::BlobMetaV2 m;
+  for (std::size_t a = 0; a < 3; ++a) m.meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
+  m.meta.voxel_m = g.voxel_m;
+  m.meta.method = blob::Method::kHermite;
+  m.band_inside = 6;
+  m.band_outside = 2;
+  const auto sparse = blob::EncodeV2(m, [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, 512> q16) {
+    return field.BrickQ16(field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])),
+                          q16);
+  });
+  EXPECT_EQ(sparse, blob::EncodeV2(m, dense));
+  std::size_t differ = 0;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) differ += field.ValueQ16(i, j, k) != dense[g.Index(i, j, k)] ? 1u : 0u;
+  EXPECT_EQ(differ, 0u);
+}
+
 // --- Field shape: clamped, and neighbour differences within the proxy's 1 voxel ---------------
 
 // The proxy's sphere tracing steps phi/sqrt(3) and needs |grad phi| <= sqrt(3) in every trilinear

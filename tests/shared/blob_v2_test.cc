@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <random>
 #include <string>
 
@@ -92,6 +93,43 @@ TEST(BlobV2, RoundTripStoresTheQuantisedClampedField) {
         ASSERT_NEAR(v->NodeQ16(i, j, k) / 256.0, want, 1.0) << i << ' ' << j << ' ' << k;  // input rounded to Q16
         ASSERT_EQ(v->NodeQ16(i, j, k) % 256, 0);
       }
+}
+
+// The brick-wise encoder (palpa build's, from a sparse field) against the dense one on a field with
+// uniform bricks inside, outside and at the grid's edge: the same bytes, whether a uniform brick
+// is handed over as one value or as 512.
+TEST(BlobV2, BrickSourceEncodesTheSameBytesAsTheDenseField) {
+  SphereGrid g = MakeSphere({37, 29, 41}, {17.2, 13.9, 20.4}, 11.3);
+  for (std::int32_t& v : g.q16) v = std::clamp(v, -6 * 65536, 2 * 65536);  // uniform bricks inside and out
+  for (const bool say_uniform : {false, true}) {
+    std::size_t uniform_bricks = 0;
+    const auto bricks = EncodeV2(
+        Meta(g),
+        [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, kBrickNodes> q16) -> std::optional<std::int32_t> {
+          std::optional<std::int32_t> first;
+          bool uniform = true;
+          for (std::uint32_t a = 0; a < kBrick; ++a)
+            for (std::uint32_t c = 0; c < kBrick; ++c)
+              for (std::uint32_t e = 0; e < kBrick; ++e) {
+                const std::uint32_t i = b[0] * kBrick + a, j = b[1] * kBrick + c, k = b[2] * kBrick + e;
+                // Past the grid's edge: garbage the encoder must ignore.
+                const std::int32_t v = i < g.dims[0] && j < g.dims[1] && k < g.dims[2]
+                                           ? g.q16[(std::size_t{i} * g.dims[1] + j) * g.dims[2] + k]
+                                           : -123456789;
+                q16[(a * kBrick + c) * kBrick + e] = v;
+                if (v == -123456789) continue;
+                uniform = uniform && (!first || *first == v);
+                if (!first) first = v;
+              }
+          if (!say_uniform || !uniform) return std::nullopt;
+          ++uniform_bricks;
+          return first;
+        });
+    EXPECT_EQ(bricks, EncodeV2(Meta(g), g.q16)) << "uniform bricks handed as one value: " << say_uniform;
+    if (say_uniform) {
+      EXPECT_GT(uniform_bricks, 10u);  // the test exercises that path
+    }
+  }
 }
 
 TEST(BlobV2, HeaderFieldOffsetsMatchTheSpec) {

@@ -290,36 +290,44 @@ int RunBuild(const BuildArgs& args) {
   meta.fit_scale = transform.scale;
   const auto build_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0);
   meta.build_time_ns = static_cast<std::uint64_t>(build_ns.count());
-  // The v1 payload is dense, but it is written once, straight from the sparse field into the
-  // output buffer (no dense float grid, no second copy): header words, then phi in Q16.16.
   const std::size_t nodes = g.NodeCount();
-  constexpr std::size_t kHeaderWords = blob::kHeaderSize / sizeof(std::int32_t);
-  const std::size_t words = kHeaderWords + nodes;
-  auto blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
-  const std::span<std::int32_t> payload(blob_words.get() + kHeaderWords, nodes);
-  built.field.WriteQ16(payload);
-  if (const std::size_t n = NegativeFaceNodes(std::span<const std::int32_t>(payload), g.dims); n > 0)
+  const std::size_t face_nodes_inside = NegativeFaceNodes(
+      [&](std::size_t i, std::size_t j, std::size_t k) {
+        return built.field.ValueQ16(static_cast<int>(i), static_cast<int>(j), static_cast<int>(k));
+      },
+      g.dims);
+  if (face_nodes_inside > 0)
     fmt::print(stderr,
                "palpa build: warning: {}: the field touches its grid boundary (φ < 0 on {} face nodes); palpad treats "
                "those faces as walls\n",
-               args.points, n);
+               args.points, face_nodes_inside);
   std::vector<std::byte> v2;
+  std::unique_ptr<std::int32_t[]> blob_words;
+  std::span<const std::byte> bytes;
   if (args.format == 2) {
-    // Blob v2: the dense values above, clamped to the asymmetric band and packed into bricks.
+    // Blob v2 straight from the sparse field, a brick at a time (no dense array: issue 21): the
+    // values clamped to the asymmetric band and packed into bricks.
     blob::BlobMetaV2 m2;
     m2.meta = meta;
     m2.band_inside = static_cast<std::uint32_t>(args.band_voxels);
     m2.band_outside = static_cast<std::uint32_t>(args.band_outside);
-    v2 = blob::EncodeV2(m2, payload);
-    blob_words.reset();
-  }
-  blob::HeaderV1 header;
-  const std::vector<std::byte> empty = blob::Encode(meta, {});  // header fields as Encode sets them
-  std::memcpy(&header, empty.data(), sizeof header);
-  header.payload_size = nodes * sizeof(std::int32_t);
-  if (args.format == 1) std::memcpy(blob_words.get(), &header, sizeof header);
-  std::span<const std::byte> bytes(v2);
-  if (args.format == 1) {
+    v2 = blob::EncodeV2(m2, [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, blob::kBrickNodes> q16) {
+      return built.field.BrickQ16(
+          built.field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])), q16);
+    });
+    bytes = v2;
+  } else {
+    // The v1 payload is dense, written once straight from the sparse field into the output
+    // buffer (no dense float grid, no second copy): header words, then phi in Q16.16.
+    constexpr std::size_t kHeaderWords = blob::kHeaderSize / sizeof(std::int32_t);
+    const std::size_t words = kHeaderWords + nodes;
+    blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
+    built.field.WriteQ16(std::span<std::int32_t>(blob_words.get() + kHeaderWords, nodes));
+    blob::HeaderV1 header;
+    const std::vector<std::byte> empty = blob::Encode(meta, {});  // header fields as Encode sets them
+    std::memcpy(&header, empty.data(), sizeof header);
+    header.payload_size = nodes * sizeof(std::int32_t);
+    std::memcpy(blob_words.get(), &header, sizeof header);
     bytes = {reinterpret_cast<const std::byte*>(blob_words.get()), words * sizeof(std::int32_t)};
     header.crc32c = Crc32cFast(bytes.subspan(blob::kHeaderSize), Crc32cFast(bytes.first(blob::kCrcOffset), 0));
     std::memcpy(blob_words.get(), &header, sizeof header);

@@ -15,6 +15,11 @@
 namespace palpa::field {
 namespace {
 
+// The blob payload's rounding (WriteQ16): nearest, halves away from 0, clamped to the band.
+std::int32_t Q16(float v, std::int32_t band_q) {
+  return std::clamp(static_cast<std::int32_t>(std::lround(static_cast<double>(v) * 65536.0)), -band_q, band_q);
+}
+
 constexpr int kB = SparseField::kBrick;
 constexpr int kHalo = kB + 2;
 constexpr int kHaloNodes = kHalo * kHalo * kHalo;
@@ -245,13 +250,21 @@ void SparseField::WriteQ16(std::span<std::int32_t> dense) const {
         }
         const float* v = values_.data() + static_cast<std::size_t>(slot) * kBrickNodes +
                          static_cast<std::size_t>(((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick);
-        for (int k = k0; k < k1; ++k) {
-          const auto q = static_cast<std::int32_t>(std::lround(static_cast<double>(v[k - k0]) * 65536.0));
-          row[k] = std::clamp(q, -band_q, band_q);
-        }
+        for (int k = k0; k < k1; ++k) row[k] = Q16(v[k - k0], band_q);
       }
     }
   });
+}
+
+std::int32_t SparseField::ValueQ16(int i, int j, int k) const { return Q16(Value(i, j, k), grid_.band_voxels * 65536); }
+
+std::optional<std::int32_t> SparseField::BrickQ16(std::size_t brick, std::span<std::int32_t, kBrickNodes> q16) const {
+  const std::int32_t band_q = grid_.band_voxels * 65536;
+  const std::int32_t slot = slots_[brick];
+  if (slot < 0) return slot == kUniformInside ? -band_q : band_q;
+  const float* v = values_.data() + static_cast<std::size_t>(slot) * kBrickNodes;
+  for (std::size_t n = 0; n < kBrickNodes; ++n) q16[n] = Q16(v[n], band_q);
+  return std::nullopt;
 }
 
 std::vector<float> SparseField::ToDense() const {

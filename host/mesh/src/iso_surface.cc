@@ -5,7 +5,13 @@
 #include <cstdint>
 #include <cstring>
 
+#include <dlfcn.h>
 #include <fmt/core.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <mutex>
+#include <string>
 
 #include "iso_surface_internal.h"
 #include "palpa/mesh/field_file.h"
@@ -67,6 +73,49 @@ Eigen::Vector3d TrilinearGradient(const blob::FieldView& field, const Eigen::Vec
   return {gx, gy, gz};
 }
 
+namespace internal {
+
+std::expected<void, std::string> VolumeToMesh(const blob::FieldView& field, std::vector<Eigen::Vector3d>& points,
+                                              std::vector<std::array<int, 3>>& triangles,
+                                              std::vector<std::array<int, 4>>& quads) {
+  static std::once_flag once;
+  static VolumeToMeshFn entry = nullptr;
+  static std::string failure;
+  std::call_once(once, [] {
+    // Beside the executable (build tree), where the package installs it (relative to bin/), and
+    // where this build wrote it (tests and benchmarks run from other directories).
+    std::vector<std::filesystem::path> tried;
+    std::error_code ec;
+    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+    if (!ec) {
+      tried.push_back(exe.parent_path() / PALPA_VDB_MODULE_NAME);
+      tried.push_back(exe.parent_path() / PALPA_VDB_MODULE_INSTALL_REL / PALPA_VDB_MODULE_NAME);
+    }
+    tried.emplace_back(PALPA_VDB_MODULE_BUILD_PATH);
+    std::string errors;
+    for (const auto& path : tried) {
+      if (!std::filesystem::exists(path, ec)) {
+        errors += fmt::format("; {}: not found", path.string());
+        continue;
+      }
+      void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+      if (handle == nullptr) {
+        errors += fmt::format("; {}: {}", path.string(), dlerror());
+        continue;
+      }
+      entry = reinterpret_cast<VolumeToMeshFn>(dlsym(handle, kVolumeToMeshSymbol));
+      if (entry != nullptr) return;
+      errors += fmt::format("; {}: no symbol {}", path.string(), kVolumeToMeshSymbol);
+    }
+    failure = fmt::format("cannot load the OpenVDB mesher {}{}", PALPA_VDB_MODULE_NAME, errors);
+  });
+  if (entry == nullptr) return std::unexpected(failure);
+  entry(&field, &points, &triangles, &quads);
+  return {};
+}
+
+}  // namespace internal
+
 std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& field) {
   const std::size_t count = static_cast<std::size_t>(field.dims[0]) * static_cast<std::size_t>(field.dims[1]) *
                             static_cast<std::size_t>(field.dims[2]);
@@ -77,7 +126,8 @@ std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& fie
   std::vector<Eigen::Vector3d> points;
   std::vector<std::array<int, 3>> triangles;
   std::vector<std::array<int, 4>> quads;
-  internal::VolumeToMesh(field, points, triangles, quads);
+  if (auto done = internal::VolumeToMesh(field, points, triangles, quads); !done)
+    return std::unexpected(Error{done.error()});
 
   TriangleMesh m;
   m.faces = std::move(triangles);

@@ -1,4 +1,5 @@
-// The only translation unit that includes OpenVDB (slow to compile): keep it small.
+// The only translation unit that includes OpenVDB (slow to compile: keep it small), built as the
+// module palpa_vdb.so that iso_surface.cc loads on first use (iso_surface_internal.h says why).
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Prune.h>
@@ -6,12 +7,13 @@
 
 #include <algorithm>
 #include <mutex>
+#include <type_traits>
 
 #include "iso_surface_internal.h"
 
-namespace palpa::mesh::internal {
+namespace {
 
-void VolumeToMesh(const blob::FieldView& field, std::vector<Eigen::Vector3d>& points,
+void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector3d>& points,
                   std::vector<std::array<int, 3>>& triangles, std::vector<std::array<int, 4>>& quads) {
   static std::once_flag init;
   std::call_once(init, [] { openvdb::initialize(); });
@@ -51,4 +53,13 @@ void VolumeToMesh(const blob::FieldView& field, std::vector<Eigen::Vector3d>& po
   });
 }
 
-}  // namespace palpa::mesh::internal
+}  // namespace
+
+extern "C" __attribute__((visibility("default"))) void palpa_vdb_volume_to_mesh(
+    const palpa::blob::FieldView* field, std::vector<Eigen::Vector3d>* points,
+    std::vector<std::array<int, 3>>* triangles, std::vector<std::array<int, 4>>* quads) {
+  VolumeToMesh(*field, *points, *triangles, *quads);
+}
+
+// The loader's type and this definition must agree.
+static_assert(std::is_same_v<decltype(&palpa_vdb_volume_to_mesh), palpa::mesh::internal::VolumeToMeshFn>);

@@ -406,7 +406,7 @@ std::uint32_t Uniform(std::int16_t phi) { return kSlotEmpty | static_cast<std::u
 
 }  // namespace
 
-std::vector<std::byte> EncodeV2(const BlobMetaV2& m, std::span<const std::int32_t> phi) {
+std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) {
   HeaderV2 h{};
   h.magic = kMagic;
   h.version = kVersion2;
@@ -433,21 +433,28 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, std::span<const std::int32_
   const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
   std::vector<std::uint32_t> index(n_slots), tables;
   std::vector<std::int16_t> values;  // stored octants, in order
+  std::array<std::int32_t, kBrickNodes> brick{};
   std::size_t slot = 0;
-  for (std::size_t bi = 0; bi < h.brick_dims[0]; ++bi) {
-    for (std::size_t bj = 0; bj < h.brick_dims[1]; ++bj) {
-      for (std::size_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
+  for (std::uint32_t bi = 0; bi < h.brick_dims[0]; ++bi) {
+    for (std::uint32_t bj = 0; bj < h.brick_dims[1]; ++bj) {
+      for (std::uint32_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
+        // A brick its source calls uniform: every octant with grid nodes holds this one value.
+        if (const std::optional<std::int32_t> all = bricks({bi, bj, bk}, brick)) {
+          index[slot] = Uniform(static_cast<std::int16_t>((std::clamp(*all, lo, hi) + 128) >> 8));
+          continue;
+        }
         std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
         std::array<bool, 8> oct_uniform{}, oct_any{};
         std::array<std::int16_t, 8> oct_phi{};
         for (std::size_t o = 0; o < 8; ++o) {
           oct_uniform[o] = true;
           for (std::size_t n = 0; n < kOctantNodes; ++n) {
-            const std::size_t i = bi * kBrick + (o >> 2) * kOctant + (n >> 4);
-            const std::size_t j = bj * kBrick + ((o >> 1) & 1) * kOctant + ((n >> 2) & 3);
-            const std::size_t k = bk * kBrick + (o & 1) * kOctant + (n & 3);
-            if (i >= dims[0] || j >= dims[1] || k >= dims[2]) continue;  // padding stays 0
-            const std::int32_t v = std::clamp(phi[(i * dims[1] + j) * dims[2] + k], lo, hi);
+            const std::size_t a = (o >> 2) * kOctant + (n >> 4);
+            const std::size_t b = ((o >> 1) & 1) * kOctant + ((n >> 2) & 3);
+            const std::size_t c = (o & 1) * kOctant + (n & 3);
+            if (bi * kBrick + a >= dims[0] || bj * kBrick + b >= dims[1] || bk * kBrick + c >= dims[2])
+              continue;  // padding stays 0
+            const std::int32_t v = std::clamp(brick[(a * kBrick + b) * kBrick + c], lo, hi);
             const auto q = static_cast<std::int16_t>((v + 128) >> 8);  // nearest, ties up
             oct[o][n] = q;
             if (!oct_any[o]) oct_phi[o] = q;
@@ -513,6 +520,21 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, std::span<const std::int32_
   crc = Crc32c(bytes.subspan(kHeaderSizeV2), crc);
   std::memcpy(out.data() + kCrcOffsetV2, &crc, sizeof crc);
   return out;
+}
+
+std::vector<std::byte> EncodeV2(const BlobMetaV2& m, std::span<const std::int32_t> phi) {
+  const std::array<std::size_t, 3> dims = {m.meta.dims[0], m.meta.dims[1], m.meta.dims[2]};
+  return EncodeV2(m, [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, kBrickNodes> out) {
+    for (std::size_t a = 0; a < kBrick; ++a)
+      for (std::size_t c = 0; c < kBrick; ++c)
+        for (std::size_t e = 0; e < kBrick; ++e) {
+          const std::size_t i = b[0] * std::size_t{kBrick} + a, j = b[1] * std::size_t{kBrick} + c,
+                            k = b[2] * std::size_t{kBrick} + e;
+          if (i < dims[0] && j < dims[1] && k < dims[2])
+            out[(a * kBrick + c) * kBrick + e] = phi[(i * dims[1] + j) * dims[2] + k];
+        }
+    return std::optional<std::int32_t>{};
+  });
 }
 
 std::vector<std::int32_t> DenseQ16(const FieldView& view) {

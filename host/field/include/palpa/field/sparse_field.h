@@ -6,6 +6,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -95,6 +96,13 @@ class SparseField {
   // Writes phi as Q16.16 voxels (round to nearest) for every node into `dense` (NodeCount()
   // values, C order), in parallel over i-planes. This is the blob v1 payload.
   void WriteQ16(std::span<std::int32_t> dense) const;
+  // phi at node (i, j, k) as WriteQ16 writes it: Q16.16 voxels, nearest, within +-band.
+  std::int32_t ValueQ16(int i, int j, int k) const;
+  // Brick `brick` as WriteQ16 writes its nodes, for a brick-wise blob encoder (blob::BrickSource):
+  // a uniform brick returns its one Q16.16 value and leaves `q16` alone; an allocated one writes
+  // its kBrickNodes values (local index as BrickValues, nodes past the grid's edge included) and
+  // returns nullopt. O(brick), no dense array.
+  std::optional<std::int32_t> BrickQ16(std::size_t brick, std::span<std::int32_t, kBrickNodes> q16) const;
   // The dense float field (tests and references only: O(volume) memory).
   std::vector<float> ToDense() const;
 

@@ -18,6 +18,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <expected>
+#include <functional>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -93,14 +95,15 @@ inline constexpr std::uint16_t kVersion2 = 2;
 inline constexpr std::uint16_t kHeaderSizeV2 = 168;
 inline constexpr std::uint32_t kValueFormatQ7_8Voxels = 2;  ///< int16, voxel/256 (Q7.8)
 inline constexpr int kBrickLog2 = 3;
-inline constexpr int kBrick = 1 << kBrickLog2;                    ///< nodes per brick edge (8)
-inline constexpr int kOctant = kBrick / 2;                        ///< nodes per octant edge (4)
-inline constexpr int kOctantNodes = kOctant * kOctant * kOctant;  ///< 64
-inline constexpr std::size_t kOctantBytes = 2 * kOctantNodes;     ///< 128
-inline constexpr std::size_t kTableBytes = 8 * 4;                 ///< a brick's octant table
-inline constexpr std::size_t kOctantAlign = 64;                   ///< octants start on a cache line
-inline constexpr std::uint32_t kSlotEmpty = 0x80000000U;          ///< entry flag: uniform, φ in the low 16 bits
-inline constexpr int kQ7_8ToQ16 = 8;                              ///< stored · 256 = Q16.16
+inline constexpr int kBrick = 1 << kBrickLog2;                                     ///< nodes per brick edge (8)
+inline constexpr int kOctant = kBrick / 2;                                         ///< nodes per octant edge (4)
+inline constexpr int kOctantNodes = kOctant * kOctant * kOctant;                   ///< 64
+inline constexpr std::size_t kBrickNodes = std::size_t{kBrick} * kBrick * kBrick;  ///< 512
+inline constexpr std::size_t kOctantBytes = 2 * kOctantNodes;                      ///< 128
+inline constexpr std::size_t kTableBytes = 8 * 4;                                  ///< a brick's octant table
+inline constexpr std::size_t kOctantAlign = 64;                                    ///< octants start on a cache line
+inline constexpr std::uint32_t kSlotEmpty = 0x80000000U;  ///< entry flag: uniform, φ in the low 16 bits
+inline constexpr int kQ7_8ToQ16 = 8;                      ///< stored · 256 = Q16.16
 
 /// The v2 header exactly as stored. Comments: size (offset) meaning, unit, allowed range.
 struct HeaderV2 {
@@ -244,6 +247,18 @@ struct BlobMetaV2 {
 /// becomes a uniform table entry and the rest are stored. Uniform slots at +band_outside then get
 /// the free-space bound (docs/blob-format.md). Non-RT; the result verifies if `meta` is in range.
 [[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, std::span<const std::int32_t> phi);
+
+/// Brick-wise input of EncodeV2 (a sparse field never made dense): called once per brick slot
+/// (bi, bj, bk), x slowest, k fastest. Either returns the one Q16.16 value (voxels) of every node
+/// of the brick, or writes the brick's 8³ Q16.16 values to `q16` (local index (a·8 + b)·8 + c for
+/// node (8·bi + a, 8·bj + b, 8·bk + c); nodes past the grid's edge are ignored) and returns
+/// nullopt.
+using BrickSource = std::function<std::optional<std::int32_t>(std::array<std::uint32_t, 3> brick,
+                                                              std::span<std::int32_t, kBrickNodes> q16)>;
+
+/// EncodeV2 from bricks: the same bytes as the dense overload for the same node values, with
+/// memory for one brick at a time besides the output. Non-RT.
+[[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, const BrickSource& bricks);
 
 /// Every node of a verified view as Q16.16 voxels, C order (v2: what the sampler reads, padding
 /// excluded). Non-RT.
