@@ -422,26 +422,38 @@ TEST(LeakGuard, SparseFandiskFalseInsideBelowUnguarded) {
 namespace palpa::field {
 namespace {
 
-// Issue 20: a one-sided scan (the cap z > 0 of sphere926, radius 10 scaled to 30 mm; its lower
-// half never scanned) is closed by the winding number into the half ball, not left a hollow
-// shell open to the grid faces. Every node more than a band (6 voxels) from the half ball's
-// boundary has the half ball's sign (within the band the local estimate rules: the rim's inner
-// balls reach ~4 voxels below the rim), and no node on a grid face is inside. (The former
-// majority vote: 1,696 inside nodes on the faces at 64 cells.)
-TEST(Winding, OneSidedScanIsClosedIntoTheHalfBall) {
+// Issue 20: a one-sided scan (the cap z > 0 of sphere926, radius 10 scaled to r = 30 mm; its
+// lower half never scanned) is closed, not left a hollow shell open to the grid faces, and closed
+// round. A small closed sphere (6 mm, centre 48 mm below) stands on the table, so the grid holds
+// the missing half. There the winding number is unclear (0.3-0.5 down to ~0.4 r below the rim)
+// and the rim's inner balls continue the sphere, as the scanned part curves; the winding number
+// alone spans the rim with a flat disc (2,316 nodes of the slab checked here, down to 0.2 r below
+// the equator, were outside before).
+// Every node more than a band (6 voxels) from the sphere has the ball's sign above the rim and
+// in that slab, and no node on a grid face is inside. (The former majority vote: 1,696 inside
+// nodes on the faces at 64 cells.)
+TEST(Winding, OneSidedScanIsClosedRoundBelowItsRim) {
   const auto pts = ReadPoints(DataFile("sphere926.pwn"));
   ASSERT_TRUE(pts) << pts.error().message;
+  const double r = 0.03;
   std::vector<Eigen::Vector3d> p, n;
-  for (std::size_t i = 0; i < pts->positions.size(); ++i)
-    if (pts->positions[i].z() > 0) p.push_back(3e-3 * pts->positions[i]), n.push_back(pts->normals[i]);
+  double rim = r;  // the lowest sample of the cap
+  for (std::size_t i = 0; i < pts->positions.size(); ++i) {
+    if (pts->positions[i].z() > 0) {
+      p.push_back(3e-3 * pts->positions[i]);
+      n.push_back(pts->normals[i]);
+      rim = std::min(rim, p.back().z());
+    }
+    p.push_back(6e-4 * pts->positions[i] + Eigen::Vector3d(0, 0, -1.6 * r));
+    n.push_back(pts->normals[i]);
+  }
   BuildOptions options;
-  options.grid.cells = 64;
+  options.grid.cells = 96;
   const auto built = BuildField(p, n, options);
   ASSERT_TRUE(built) << built.error().message;
   const SparseField& f = built->field;
   const GridSpec& g = f.grid();
-  const double r = 0.03;
-  std::size_t face_inside = 0, wrong = 0, checked_inside = 0, checked = 0;
+  std::size_t face_inside = 0, wrong = 0, checked_below = 0, checked = 0;
   for (int i = 0; i < g.dims[0]; ++i)
     for (int j = 0; j < g.dims[1]; ++j)
       for (int k = 0; k < g.dims[2]; ++k) {
@@ -449,18 +461,16 @@ TEST(Winding, OneSidedScanIsClosedIntoTheHalfBall) {
         const bool face = i == 0 || j == 0 || k == 0 || i == g.dims[0] - 1 || j == g.dims[1] - 1 || k == g.dims[2] - 1;
         if (face && inside) ++face_inside;
         const Eigen::Vector3d x = g.origin_m + g.voxel_m * Eigen::Vector3d(i, j, k);
-        // Distance to the half ball's boundary (sphere part or disc) is at least min(|x| - r|, |z|).
-        const double clearance = std::min(std::abs(x.norm() - r), std::abs(x.z())) / g.voxel_m;
-        if (clearance <= g.band_voxels) continue;
-        const bool truth = x.norm() < r && x.z() > 0;
+        if (std::abs(x.norm() - r) / g.voxel_m <= g.band_voxels) continue;
+        const bool below = x.z() < rim - g.voxel_m;
+        if (below && (x.z() < -0.2 * r || x.norm() > r)) continue;  // the slab below the rim, in the ball
         ++checked;
-        checked_inside += truth ? 1 : 0;
-        wrong += inside != truth ? 1 : 0;
+        checked_below += below ? 1u : 0u;
+        wrong += inside != (x.norm() < r) ? 1u : 0u;
       }
   EXPECT_EQ(face_inside, 0u);
-  EXPECT_GT(checked_inside, 5000u);
+  EXPECT_GT(checked_below, 5000u);
   EXPECT_EQ(wrong, 0u) << "of " << checked;
-  EXPECT_GT(built->hermite.winding_bricks, 0u);  // the disc lies in bricks no sample reaches
 }
 
 }  // namespace

@@ -267,8 +267,9 @@ int RunBuild(const BuildArgs& args) {
   if (open_scan) {
     const double closed = built.hermite.closed_area_m2 / (transform.scale * transform.scale);  // model units^2
     fmt::print(stderr,
-               "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it by the "
-               "winding number of the samples over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
+               "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it (by the "
+               "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
+               "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
                args.points, built.hermite.closed_area_m2 * 1e6, closed,
                built.hermite.face_nodes_closed > 0
                    ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)

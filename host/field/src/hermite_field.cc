@@ -42,6 +42,15 @@ constexpr float kClampedSlack = 1e-3f;  // a node this close to +-band was clamp
 constexpr double kTrustVoxels = 2.0;
 constexpr double kTrustSpacings = 0.25;
 constexpr double kWindingClear = 0.2;
+// Where w is unclear, in [1/2 - kWindingClear, 1/2) (an open side's missing part: a sphere
+// scanned above 0.17 R has 0.3-0.5 inside the grid below its rim), the inner balls of the
+// nearest samples decide: the closure continues the scanned curvature instead of spanning the
+// rim flat. Lower thresholds closed more of a sphere's missing cap but made phantom solid on a
+// closed mesh's thin parts, where w outside reaches 0.1-0.25 (bull, 1,000 samples or estimated
+// normals: 102 -> 147-613 and 6 -> 67-4,340 far-wrong nodes at 0.25-0.1).
+constexpr double kBallClosingWinding = 0.5 - kWindingClear;
+// Inner balls tried per query (those of the samples nearest it).
+constexpr std::size_t kClosingBalls = 16;
 constexpr double kOpenFaceWinding = 0.1;
 // Samples considered per 8^3 brick: the nearest to its centre. They hold every node's few nearest
 // samples, and their balls form the bracket (any subset of the balls gives valid bounds).
@@ -618,13 +627,16 @@ namespace {
 
 // Inside/outside of every brick the evaluation left unallocated, from the winding number of the
 // samples (issue 20; replaces the majority vote of LabelUnallocatedBricks, which a hole, an open
-// scan or an outlier turns into phantom solid far from the surface). w is evaluated at the brick
-// corners (one lattice, (bricks + 1)^3 queries); a brick whose 8 corners agree is uniform on that
-// side of w = 1/2. A brick whose corners disagree holds the w = 1/2 surface (the closure of a
-// hole or of an unscanned side, far from any sample): it takes phi = (1/2 - w) / |grad w| at
-// each node, the first-order distance to that level set (central differences over 1 voxel),
-// clamped to the band; the Lipschitz projection then bounds it like any other value. So the
-// closing surface is smooth, never a staircase of brick faces.
+// scan or an outlier turns into phantom solid far from the surface). Inside is w >= 1/2, or w
+// unclear (>= kBallClosingWinding) within the inner ball of one of the kClosingBalls samples
+// nearest the node: an unscanned side is closed round, as the scanned part curves, not flat
+// across its rim. The side is decided at the brick corners (one lattice, (bricks + 1)^3
+// queries); a brick whose 8 corners agree is uniform on that side. A brick whose corners
+// disagree holds the closing surface (of a hole or of an unscanned side, far from any sample):
+// each node takes the first-order distance to it, min(d(w = 1/2), max(d(w = kBallClosingWinding),
+// d(balls))) with d(w = t) = (t - w) / |grad w| (central differences over 1 voxel), clamped to
+// the band; the Lipschitz projection then bounds it like any other value. So the closing surface
+// is smooth, never a staircase of brick faces.
 // `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                     const KdTree& tree, const std::vector<double>& spacing, HermiteStats& st) {
@@ -637,22 +649,43 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const std::array<std::size_t, 3> cd = {static_cast<std::size_t>(bd[0]) + 1, static_cast<std::size_t>(bd[1]) + 1,
                                          static_cast<std::size_t>(bd[2]) + 1};
   const auto node_at = [&](double i, double j, double k) { return V3(grid.origin_m + h * V3(i, j, k)); };
+  // Signed distance (metres) to the union of the inner balls of the samples nearest p.
+  const auto ball_phi = [&](const V3& p) {
+    std::array<std::size_t, kClosingBalls> idx{};
+    std::array<double, kClosingBalls> d2{};
+    const std::size_t got = tree.knnSearch(p.data(), kClosingBalls, idx.data(), d2.data());
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t m = 0; m < got; ++m)
+      best = std::min(best, (p - st.inner.centres[idx[m]]).norm() - st.inner.radii[idx[m]]);
+    return best;
+  };
+  const auto inside_at = [&](double w, const V3& p) {
+    return w >= 0.5 || (w >= kBallClosingWinding && ball_phi(p) < 0.0);
+  };
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
+  std::vector<std::uint8_t> corner_in(corner_w.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i)
       for (std::size_t j = 0; j < cd[1]; ++j)
-        for (std::size_t k = 0; k < cd[2]; ++k)
-          corner_w[(i * cd[1] + j) * cd[2] + k] = static_cast<float>(
-              winding(node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB))));
+        for (std::size_t k = 0; k < cd[2]; ++k) {
+          const std::size_t c = (i * cd[1] + j) * cd[2] + k;
+          const V3 p = node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB));
+          const double w = winding(p);
+          corner_w[c] = static_cast<float>(w);
+          corner_in[c] = inside_at(w, p) ? 1 : 0;
+        }
   });
   const auto plane_bricks = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
-  const auto corners = [&](std::size_t b) {
+  // Corner c (bit 2: +x, bit 1: +y, bit 0: +z) of brick b in the corner lattice.
+  const auto corner_index = [&](std::size_t b, std::size_t c) {
     const std::size_t bi = b / plane_bricks;
     const std::size_t bj = (b / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1]);
     const std::size_t bk = b % static_cast<std::size_t>(bd[2]);
+    return ((bi + (c >> 2)) * cd[1] + bj + ((c >> 1) & 1)) * cd[2] + bk + (c & 1);
+  };
+  const auto corners = [&](std::size_t b) {
     std::array<float, 8> out{};
-    for (std::size_t c = 0; c < 8; ++c)
-      out[c] = corner_w[((bi + (c >> 2)) * cd[1] + bj + ((c >> 1) & 1)) * cd[2] + bk + (c & 1)];
+    for (std::size_t c = 0; c < 8; ++c) out[c] = corner_w[corner_index(b, c)];
     return out;
   };
   std::vector<std::size_t> mixed;
@@ -663,7 +696,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       continue;
     }
     int inside = 0;
-    for (const float w : corners(b)) inside += w >= 0.5f ? 1 : 0;
+    for (std::size_t c = 0; c < 8; ++c) inside += corner_in[corner_index(b, c)];
     if (inside == 0 || inside == 8) {
       field.SetUniform(b, inside == 8);
     } else {
@@ -672,10 +705,12 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   }
   for (const std::size_t b : mixed) field.Allocate(b);
   st.winding_bricks = mixed.size();
-  std::vector<std::size_t> crossings(mixed.size(), 0);  // grid edges crossing w = 1/2, per brick
+  std::vector<std::size_t> crossings(mixed.size(), 0);  // grid edges crossing the closing surface, per brick
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mixed.size(), 1), [&](const auto& r) {
     constexpr int kH = kB + 2;  // one node of halo on each side, for the gradient
     std::vector<double> w(static_cast<std::size_t>(kH * kH * kH));
+    // Signed distance to the inner balls (voxels) where w is unclear; +infinity elsewhere.
+    std::vector<double> balls(w.size());
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
       const auto plane = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
@@ -684,11 +719,17 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const int bk = static_cast<int>(b % static_cast<std::size_t>(bd[2]));
       for (int a = 0; a < kH; ++a)
         for (int c = 0; c < kH; ++c)
-          for (int e = 0; e < kH; ++e)
-            w[static_cast<std::size_t>((a * kH + c) * kH + e)] =
-                winding(node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1));
+          for (int e = 0; e < kH; ++e) {
+            const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
+            const V3 q = node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
+            w[x] = winding(q);
+            balls[x] =
+                w[x] >= kBallClosingWinding && w[x] < 0.5 ? ball_phi(q) / h : std::numeric_limits<double>::infinity();
+          }
       float* values = field.BrickValues(b);
       const auto at = [&](int a, int c, int e) { return w[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
+      const auto ball_at = [&](int a, int c, int e) { return balls[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
+      const auto in_at = [&](int a, int c, int e) { return at(a, c, e) >= 0.5 || ball_at(a, c, e) < 0.0; };
       for (int a = 1; a <= kB; ++a)
         for (int c = 1; c <= kB; ++c)
           for (int e = 1; e <= kB; ++e) {
@@ -696,17 +737,19 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             const V3 g(0.5 * (at(a + 1, c, e) - at(a - 1, c, e)), 0.5 * (at(a, c + 1, e) - at(a, c - 1, e)),
                        0.5 * (at(a, c, e + 1) - at(a, c, e - 1)));
             const double gn = g.norm();
-            const bool inside = here >= 0.5;
-            double phi = gn > 1e-12 ? (0.5 - here) / gn : (inside ? -band : band);
+            const bool inside = in_at(a, c, e);
+            double phi = gn > 1e-12 ? (0.5 - here) / gn : (here >= 0.5 ? -band : band);
+            if (std::isfinite(ball_at(a, c, e)))  // the union with {w unclear} within the balls
+              phi = std::min(phi, std::max(gn > 1e-12 ? (kBallClosingWinding - here) / gn : -band, ball_at(a, c, e)));
             phi = std::clamp(phi, -static_cast<double>(band), static_cast<double>(band));
-            if (inside && phi > 0.0) phi = 0.0;  // keep w's side
+            if (inside && phi > 0.0) phi = 0.0;  // keep the decided side
             values[((a - 1) * kB + (c - 1)) * kB + (e - 1)] =
                 inside ? static_cast<float>(std::min(phi, -0.0)) : std::max(static_cast<float>(phi), 1e-6f);
             // Edges to the +x, +y, +z neighbour (each edge once: from its lower node) in the grid.
             const int i = bi * kB + a - 1, j = bj * kB + c - 1, k = bk * kB + e - 1;
-            if (i + 1 < grid.dims[0] && (at(a + 1, c, e) >= 0.5) != inside) ++crossings[m];
-            if (j + 1 < grid.dims[1] && (at(a, c + 1, e) >= 0.5) != inside) ++crossings[m];
-            if (k + 1 < grid.dims[2] && (at(a, c, e + 1) >= 0.5) != inside) ++crossings[m];
+            if (i + 1 < grid.dims[0] && in_at(a + 1, c, e) != inside) ++crossings[m];
+            if (j + 1 < grid.dims[1] && in_at(a, c + 1, e) != inside) ++crossings[m];
+            if (k + 1 < grid.dims[2] && in_at(a, c, e + 1) != inside) ++crossings[m];
           }
     }
   });
