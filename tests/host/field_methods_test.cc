@@ -226,7 +226,13 @@ TEST(FieldMethods, BrickWiseBlobEqualsTheDensePayloadsBlob) {
   std::size_t differ = 0;
   for (int i = 0; i < g.dims[0]; ++i)
     for (int j = 0; j < g.dims[1]; ++j)
-      for (int k = 0; k < g.dims[2]; ++k) differ += field.ValueQ16(i, j, k) != dense[g.Index(i, j, k)] ? 1u : 0u;
+      for (int k = 0; k < g.dims[2]; ++k) {
+        // The rounding rule itself: std::lround of phi · 2^16, clamped to the band.
+        const std::int32_t band_q = g.band_voxels * 65536;
+        const auto want =
+            std::clamp(static_cast<std::int32_t>(std::lround(double{field.Value(i, j, k)} * 65536.0)), -band_q, band_q);
+        differ += field.ValueQ16(i, j, k) != want || dense[g.Index(i, j, k)] != want ? 1u : 0u;
+      }
   EXPECT_EQ(differ, 0u);
 }
 

@@ -446,21 +446,34 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) 
         std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
         std::array<bool, 8> oct_uniform{}, oct_any{};
         std::array<std::int16_t, 8> oct_phi{};
+        // Nodes of this brick inside the grid, per axis (8 but at the grid's far edges).
+        const std::array<std::size_t, 3> in = {std::min<std::size_t>(kBrick, dims[0] - bi * std::size_t{kBrick}),
+                                               std::min<std::size_t>(kBrick, dims[1] - bj * std::size_t{kBrick}),
+                                               std::min<std::size_t>(kBrick, dims[2] - bk * std::size_t{kBrick})};
         for (std::size_t o = 0; o < 8; ++o) {
-          oct_uniform[o] = true;
-          for (std::size_t n = 0; n < kOctantNodes; ++n) {
-            const std::size_t a = (o >> 2) * kOctant + (n >> 4);
-            const std::size_t b = ((o >> 1) & 1) * kOctant + ((n >> 2) & 3);
-            const std::size_t c = (o & 1) * kOctant + (n & 3);
-            if (bi * kBrick + a >= dims[0] || bj * kBrick + b >= dims[1] || bk * kBrick + c >= dims[2])
-              continue;  // padding stays 0
-            const std::int32_t v = std::clamp(brick[(a * kBrick + b) * kBrick + c], lo, hi);
-            const auto q = static_cast<std::int16_t>((v + 128) >> 8);  // nearest, ties up
-            oct[o][n] = q;
-            if (!oct_any[o]) oct_phi[o] = q;
-            oct_uniform[o] = oct_uniform[o] && q == oct_phi[o];
-            oct_any[o] = true;
+          const std::size_t a0 = (o >> 2) * kOctant, b0 = ((o >> 1) & 1) * kOctant, c0 = (o & 1) * kOctant;
+          if (a0 >= in[0] || b0 >= in[1] || c0 >= in[2]) {
+            oct_uniform[o] = true;  // no grid node: a uniform 0 entry
+            continue;
           }
+          const std::int32_t* src = brick.data() + (a0 * kBrick + b0) * kBrick + c0;
+          std::int16_t* dst = oct[o].data();
+          const std::size_t na = std::min<std::size_t>(kOctant, in[0] - a0);
+          const std::size_t nb = std::min<std::size_t>(kOctant, in[1] - b0);
+          const std::size_t nc = std::min<std::size_t>(kOctant, in[2] - c0);
+          const auto q0 = static_cast<std::int16_t>((std::clamp(src[0], lo, hi) + 128) >> 8);  // nearest, ties up
+          bool same = true;
+          for (std::size_t a = 0; a < na; ++a)
+            for (std::size_t b = 0; b < nb; ++b)
+              for (std::size_t c = 0; c < nc; ++c) {
+                const auto q =
+                    static_cast<std::int16_t>((std::clamp(src[(a * kBrick + b) * kBrick + c], lo, hi) + 128) >> 8);
+                dst[(a * kOctant + b) * kOctant + c] = q;
+                same = same && q == q0;
+              }
+          oct_any[o] = true;
+          oct_uniform[o] = same;
+          oct_phi[o] = q0;
         }
         // The brick is uniform if every octant with grid nodes is, with one value.
         bool uniform = true;
