@@ -6,9 +6,11 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <utility>
 
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -138,16 +140,14 @@ float* SparseField::Allocate(std::size_t brick) {
   if (slots_[brick] < 0) {
     const auto band = static_cast<float>(grid_.band_voxels);
     const float fill = slots_[brick] == kUniformInside ? -band : band;
-    slots_[brick] = static_cast<std::int32_t>(values_.size() / kBrickNodes);
-    values_.resize(values_.size() + kBrickNodes, fill);
+    if (stored_ % kPageBricks == 0) pages_.emplace_back(kPageBricks * kBrickNodes);
+    slots_[brick] = static_cast<std::int32_t>(stored_++);
+    std::fill_n(Stored(slots_[brick]), kBrickNodes, fill);
   }
   return BrickValues(brick);
 }
 
 void SparseField::AllocateAll(const std::vector<std::uint8_t>& active) {
-  std::size_t count = 0;
-  for (std::size_t b = 0; b < slots_.size(); ++b) count += (active[b] != 0 && slots_[b] < 0) ? 1u : 0u;
-  values_.reserve(values_.size() + count * kBrickNodes);
   for (std::size_t b = 0; b < slots_.size(); ++b) {
     if (active[b] != 0) Allocate(b);
   }
@@ -160,8 +160,7 @@ float SparseField::Value(int i, int j, int k) const {
   if (slot == kUniformInside) return -band;
   if (slot < 0) return band;
   const int a = i & (kBrick - 1), b = j & (kBrick - 1), c = k & (kBrick - 1);
-  return values_[static_cast<std::size_t>(slot) * kBrickNodes +
-                 static_cast<std::size_t>((a * kBrick + b) * kBrick + c)];
+  return Stored(slot)[(a * kBrick + b) * kBrick + c];
 }
 
 SparseField SparseField::FromDense(const GridSpec& grid, std::span<const float> phi_voxels) {
@@ -226,7 +225,7 @@ std::size_t SparseField::CountInside() const {
               const std::int32_t slot = slots_[BrickIndex(bi, bj, bk)];
               if (slot == kUniformInside) acc += box.NodeCount();
               if (slot < 0) continue;
-              const float* v = values_.data() + static_cast<std::size_t>(slot) * kBrickNodes;
+              const float* v = Stored(slot);
               for (int a = 0; a < box.n[0]; ++a)
                 for (int b = 0; b < box.n[1]; ++b)
                   for (int c = 0; c < box.n[2]; ++c) acc += v[(a * kBrick + b) * kBrick + c] <= 0.0f ? 1u : 0u;
@@ -252,8 +251,8 @@ void SparseField::WriteQ16(std::span<std::int32_t> dense) const {
           std::fill(row + k0, row + k1, slot == kUniformInside ? -band_q : band_q);
           continue;
         }
-        const float* v = values_.data() + static_cast<std::size_t>(slot) * kBrickNodes +
-                         static_cast<std::size_t>(((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick);
+        const float* v =
+            Stored(slot) + static_cast<std::size_t>(((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick);
         for (int k = k0; k < k1; ++k) row[k] = Q16(v[k - k0], band_q);
       }
     }
@@ -266,7 +265,7 @@ std::optional<std::int32_t> SparseField::BrickQ16(std::size_t brick, std::span<s
   const std::int32_t band_q = grid_.band_voxels * 65536;
   const std::int32_t slot = slots_[brick];
   if (slot < 0) return slot == kUniformInside ? -band_q : band_q;
-  const float* v = values_.data() + static_cast<std::size_t>(slot) * kBrickNodes;
+  const float* v = Stored(slot);
   for (std::size_t n = 0; n < kBrickNodes; ++n) q16[n] = Q16(v[n], band_q);
   return std::nullopt;
 }
@@ -299,7 +298,7 @@ void SparseField::GatherHalo(std::size_t brick, float* halo) const {
   const std::array<int, 3> bc = BrickCoords(brick);
   const std::array<int, 3> n = Box(bc[0], bc[1], bc[2]).n;
   const auto row_bytes = static_cast<std::size_t>(n[2]) * sizeof(float);
-  const float* own = values_.data() + static_cast<std::size_t>(slots_[brick]) * kBrickNodes;
+  const float* own = Stored(slots_[brick]);
   for (int a = 0; a < n[0]; ++a)
     for (int b = 0; b < n[1]; ++b) std::memcpy(halo + H(a, b, 0), own + L(a, b, 0), row_bytes);
   // The face neighbours' layers next to this brick: src(a, b, c) gives the neighbour's value for
@@ -314,7 +313,7 @@ void SparseField::GatherHalo(std::size_t brick, float* halo) const {
       continue;
     if (high && n[static_cast<std::size_t>(axis)] != kB) continue;
     const std::int32_t slot = slots_[BrickIndex(nb[0], nb[1], nb[2])];
-    const float* src = slot >= 0 ? values_.data() + static_cast<std::size_t>(slot) * kBrickNodes : nullptr;
+    const float* src = slot >= 0 ? Stored(slot) : nullptr;
     const float uniform = slot == kUniformInside ? -band : band;
     const int at = high ? kB : -1;       // halo layer
     const int from = high ? 0 : kB - 1;  // the neighbour's layer
@@ -378,7 +377,7 @@ std::size_t SparseField::LabelUnallocatedBricks() {
       if (slots_[b] < 0) continue;
       const std::array<int, 3> c = BrickCoords(b);
       const BrickBox box = Box(c[0], c[1], c[2]);
-      const float* v = values_.data() + static_cast<std::size_t>(slots_[b]) * kBrickNodes;
+      const float* v = Stored(slots_[b]);
       for (int f = 0; f < 6; ++f) {
         std::array<int, 3> nb = c;
         nb[static_cast<std::size_t>(f / 2)] += (f % 2) == 1 ? 1 : -1;
@@ -460,7 +459,6 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
     std::vector<std::size_t> fresh;
     for (std::size_t b = 0; b < n_bricks; ++b)
       if (want[b] != 0 && slots_[b] < 0) fresh.push_back(b);
-    values_.reserve(values_.size() + fresh.size() * kBrickNodes);
     for (const std::size_t b : fresh) Allocate(b);
     st.bricks_allocated += fresh.size();
     return fresh;
@@ -473,8 +471,7 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_bricks, 64), [&](const auto& r) {
       std::size_t& local = conflicts.local();
       for (std::size_t b = r.begin(); b != r.end(); ++b)
-        if (slots_[b] >= 0)
-          flag_uniform_faces(b, values_.data() + static_cast<std::size_t>(slots_[b]) * kBrickNodes, &local);
+        if (slots_[b] >= 0) flag_uniform_faces(b, Stored(slots_[b]), &local);
     });
     st.sign_conflict_nodes = conflicts.combine(std::plus<>());
     allocate_flagged();
@@ -490,7 +487,10 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
     std::vector<std::size_t> allocated;
     for (std::size_t b = 0; b < n_bricks; ++b)
       if (slots_[b] >= 0) allocated.push_back(b);
-    std::vector<float> scaled = values_;
+    // The scaled values, kept aside until every node has read its neighbours' input values: only
+    // interface nodes change, so a list of them, not a copy of the field (issue 21: the copy was
+    // 60 MB of the kitten's 144 MB peak at 600 cells).
+    tbb::enumerable_thread_specific<std::vector<std::pair<std::size_t, float>>> scaled;
     tbb::combinable<std::size_t> count([] { return std::size_t{0}; });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, allocated.size(), 16), [&](const auto& r) {
       std::array<float, kHaloNodes> h;
@@ -501,7 +501,8 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
         const std::array<int, 3> c = BrickCoords(b);
         const BrickBox box = Box(c[0], c[1], c[2]);
         if (AnyViolation(h.data(), box.n)) first[b] |= 1;
-        float* out = scaled.data() + static_cast<std::size_t>(slots_[b]) * kBrickNodes;
+        const std::size_t base = static_cast<std::size_t>(slots_[b]) * kBrickNodes;
+        auto& out = scaled.local();
         for (int a = 0; a < box.n[0]; ++a)
           for (int bb = 0; bb < box.n[1]; ++bb)
             for (int cc = 0; cc < box.n[2]; ++cc) {
@@ -517,14 +518,16 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
               if (largest > kLipschitzStep) {
                 const float scale = kLipschitzStep / largest;
                 // An outside node stays strictly positive (phi <= 0 means inside).
-                out[L(a, bb, cc)] = inside ? v * scale : std::max(v * scale, std::numeric_limits<float>::min());
+                out.emplace_back(base + static_cast<std::size_t>(L(a, bb, cc)),
+                                 inside ? v * scale : std::max(v * scale, std::numeric_limits<float>::min()));
                 ++local;
                 first[b] |= 2;
               }
             }
       }
     });
-    values_.swap(scaled);
+    for (const auto& list : scaled)
+      for (const auto& [at, v] : list) Stored(static_cast<std::int32_t>(at / kBrickNodes))[at % kBrickNodes] = v;
     st.interface_nodes_scaled = count.combine(std::plus<>());
     for (const std::size_t b : allocated) {
       bool visit = first[b] != 0;
@@ -564,7 +567,7 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
           bool converged = true;
           before = h;
           const bool changed = RelaxHalo(h.data(), box.n, converged);
-          float* v = values_.data() + static_cast<std::size_t>(slots_[b]) * kBrickNodes;
+          float* v = Stored(slots_[b]);
           if (changed) {
             std::array<bool, 6> face_changed{};
             for (int a = 0; a < box.n[0]; ++a)
