@@ -432,7 +432,11 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) 
   const std::int32_t hi = static_cast<std::int32_t>(m.band_outside) << 16;
   const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
   std::vector<std::uint32_t> index(n_slots), tables;
-  std::vector<std::int16_t> values;  // stored octants, in order
+  // Stored octants, in order, in chunks that never move: a vector grown by doubling held its old
+  // and new buffers at once, a third of the 1,200-cell kitten build's peak.
+  constexpr std::size_t kChunkOctants = 4096;
+  std::vector<std::vector<std::int16_t>> chunks;
+  std::size_t octants = 0;
   std::array<std::int32_t, kBrickNodes> brick{};
   std::size_t slot = 0;
   for (std::uint32_t bi = 0; bi < h.brick_dims[0]; ++bi) {
@@ -494,8 +498,10 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) 
           if (oct_uniform[o]) {
             tables.push_back(Uniform(oct_phi[o]));  // an octant without grid nodes: 0
           } else {
-            tables.push_back(static_cast<std::uint32_t>(values.size() / kOctantNodes));
-            values.insert(values.end(), oct[o].begin(), oct[o].end());
+            tables.push_back(static_cast<std::uint32_t>(octants));
+            if (octants % kChunkOctants == 0) chunks.emplace_back().reserve(kChunkOctants * kOctantNodes);
+            chunks.back().insert(chunks.back().end(), oct[o].begin(), oct[o].end());
+            ++octants;
           }
         }
       }
@@ -518,15 +524,18 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) 
     }
   }
   h.brick_count = static_cast<std::uint32_t>(tables.size() / 8);
-  h.octant_count = static_cast<std::uint32_t>(values.size() / kOctantNodes);
+  h.octant_count = static_cast<std::uint32_t>(octants);
   const std::uint64_t tables_at = kHeaderSizeV2 + 4 * slots;
   h.octants_offset = AlignUp(tables_at + kTableBytes * h.brick_count, kOctantAlign);
   h.payload_size = h.octants_offset - kHeaderSizeV2 + std::uint64_t{h.octant_count} * kOctantBytes;
   std::vector<std::byte> out(kHeaderSizeV2 + static_cast<std::size_t>(h.payload_size));  // zeroed padding
   std::memcpy(out.data() + kHeaderSizeV2, index.data(), 4 * index.size());
   if (!tables.empty()) std::memcpy(out.data() + static_cast<std::size_t>(tables_at), tables.data(), 4 * tables.size());
-  if (!values.empty())
-    std::memcpy(out.data() + static_cast<std::size_t>(h.octants_offset), values.data(), 2 * values.size());
+  std::size_t at = static_cast<std::size_t>(h.octants_offset);
+  for (const auto& chunk : chunks) {
+    std::memcpy(out.data() + at, chunk.data(), 2 * chunk.size());
+    at += 2 * chunk.size();
+  }
   std::memcpy(out.data(), &h, sizeof h);
   const std::span<const std::byte> bytes(out);
   std::uint32_t crc = Crc32c(bytes.first(kCrcOffsetV2));
