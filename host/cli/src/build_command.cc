@@ -275,7 +275,9 @@ int RunBuild(const BuildArgs& args) {
                    ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
                    : std::string());
   }
-  const field::GridSpec& g = built.field.grid();
+  const field::GridSpec g = built.field.grid();  // a copy: the field is handed to the encoder below
+  const std::size_t field_bricks = built.field.AllocatedBricks();
+  const std::array<int, 3> brick_dims = built.field.brick_dims();
   blob::BlobMeta meta;
   for (std::size_t a = 0; a < 3; ++a) {
     meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
@@ -312,9 +314,12 @@ int RunBuild(const BuildArgs& args) {
     m2.meta = meta;
     m2.band_inside = static_cast<std::uint32_t>(args.band_voxels);
     m2.band_outside = static_cast<std::uint32_t>(args.band_outside);
-    v2 = blob::EncodeV2(m2, [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, blob::kBrickNodes> q16) {
-      return built.field.BrickQ16(
-          built.field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])), q16);
+    // The encoder owns the field from here and frees it once every brick is read, before it
+    // assembles the blob: they never coexist whole (issue 21's memory targets).
+    v2 = blob::EncodeV2(m2, [field = std::move(built.field)](std::array<std::uint32_t, 3> b,
+                                                             std::span<std::int32_t, blob::kBrickNodes> q16) {
+      return field.BrickQ16(field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])),
+                            q16);
     });
     bytes = v2;
   } else {
@@ -351,10 +356,9 @@ int RunBuild(const BuildArgs& args) {
                  g.voxel_m * 1e3, g.band_voxels);
     }
     fmt::print("  method      {}, {} nodes inside, {} of {} bricks with band values\n",
-               field::MethodName(options.method), built.inside_nodes, built.field.AllocatedBricks(),
-               static_cast<std::size_t>(built.field.brick_dims()[0]) *
-                   static_cast<std::size_t>(built.field.brick_dims()[1]) *
-                   static_cast<std::size_t>(built.field.brick_dims()[2]));
+               field::MethodName(options.method), built.inside_nodes, field_bricks,
+               static_cast<std::size_t>(brick_dims[0]) * static_cast<std::size_t>(brick_dims[1]) *
+                   static_cast<std::size_t>(brick_dims[2]));
     fmt::print("  time        {:.3f} s (packing {:.3f} s, indicator {:.3f} s, distance {:.3f} s)\n", total_s,
                built.seconds_packing, built.seconds_indicator, built.seconds_distance);
     fmt::print("  blob        v{}, {} bytes ({:.2f} % of dense float32)\n", args.format, bytes.size(),

@@ -406,7 +406,7 @@ std::uint32_t Uniform(std::int16_t phi) { return kSlotEmpty | static_cast<std::u
 
 }  // namespace
 
-std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) {
+std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
   HeaderV2 h{};
   h.magic = kMagic;
   h.version = kVersion2;
@@ -507,6 +507,7 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, const BrickSource& bricks) 
       }
     }
   }
+  bricks = nullptr;  // every brick is read: free the source (and its field) before the output
   if (m.free_space_bounds) {
     const std::uint32_t outside = Uniform(static_cast<std::int16_t>(m.band_outside * 256));
     std::vector<bool> near(n_slots);

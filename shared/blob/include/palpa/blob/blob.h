@@ -257,8 +257,10 @@ using BrickSource = std::function<std::optional<std::int32_t>(std::array<std::ui
                                                               std::span<std::int32_t, kBrickNodes> q16)>;
 
 /// EncodeV2 from bricks: the same bytes as the dense overload for the same node values, with
-/// memory for one brick at a time besides the output. Non-RT.
-[[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, const BrickSource& bricks);
+/// memory for one brick at a time besides the output. `bricks`, and whatever it owns, is released
+/// once every brick is read and before the blob is assembled, so that a source that owns its
+/// field (palpa build's) never coexists with the whole output. Non-RT.
+[[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, BrickSource bricks);
 
 /// Every node of a verified view as Q16.16 voxels, C order (v2: what the sampler reads, padding
 /// excluded). Non-RT.
