@@ -678,10 +678,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const auto plane_bricks = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
   // Corner c (bit 2: +x, bit 1: +y, bit 0: +z) of brick b in the corner lattice.
   const auto corner_index = [&](std::size_t b, std::size_t c) {
-    const std::size_t bi = b / plane_bricks;
-    const std::size_t bj = (b / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1]);
-    const std::size_t bk = b % static_cast<std::size_t>(bd[2]);
-    return ((bi + (c >> 2)) * cd[1] + bj + ((c >> 1) & 1)) * cd[2] + bk + (c & 1);
+    const std::array<int, 3> bc = field.BrickCoords(b);
+    return ((static_cast<std::size_t>(bc[0]) + (c >> 2)) * cd[1] + static_cast<std::size_t>(bc[1]) + ((c >> 1) & 1)) *
+               cd[2] +
+           static_cast<std::size_t>(bc[2]) + (c & 1);
   };
   const auto corners = [&](std::size_t b) {
     std::array<float, 8> out{};
@@ -713,10 +713,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<double> balls(w.size());
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
-      const auto plane = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
-      const int bi = static_cast<int>(b / plane);
-      const int bj = static_cast<int>((b / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1]));
-      const int bk = static_cast<int>(b % static_cast<std::size_t>(bd[2]));
+      const auto [bi, bj, bk] = field.BrickCoords(b);
       for (int a = 0; a < kH; ++a)
         for (int c = 0; c < kH; ++c)
           for (int e = 0; e < kH; ++e) {
@@ -802,9 +799,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = evaluated[m];
       const std::array<float, 8> cw = corners(b);
-      const std::size_t bi = b / plane_bricks;
-      const std::size_t bj = (b / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1]);
-      const std::size_t bk = b % static_cast<std::size_t>(bd[2]);
+      const auto [bi, bj, bk] = field.BrickCoords(b);
       float* values = field.BrickValues(b);
       for (int a = 0; a < kB; ++a)
         for (int c = 0; c < kB; ++c)
@@ -817,9 +812,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
               wi += cw[static_cast<std::size_t>(q)] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v) *
                     ((q & 1) != 0 ? t : 1.0f - t);
             if ((wi >= 0.5f) == (x <= 0.0f)) continue;
-            const V3 p = grid.origin_m + h * V3(static_cast<double>(bi * kB + static_cast<std::size_t>(a)),
-                                                static_cast<double>(bj * kB + static_cast<std::size_t>(c)),
-                                                static_cast<double>(bk * kB + static_cast<std::size_t>(e)));
+            const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
             std::size_t idx = 0;
             double d2 = 0.0;
             tree.knnSearch(p.data(), 1, &idx, &d2);
@@ -834,9 +827,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             // closing surface w is still a tenth or more there (a thin open plate cut by its grid:
             // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
             // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
-            if (w >= kOpenFaceWinding && on_grid_face(static_cast<int>(bi) * kB + a, static_cast<int>(bj) * kB + c,
-                                                      static_cast<int>(bk) * kB + e))
-              ++face_local;
+            if (w >= kOpenFaceWinding && on_grid_face(bi * kB + a, bj * kB + c, bk * kB + e)) ++face_local;
           }
     }
     far_flipped += local;
@@ -949,13 +940,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     if (marked[b] != 0) candidates.push_back(b);
 
   const V3 origin_vox = grid.origin_m / h;
-  const auto brick_coords = [&](std::size_t brick) {
-    const auto plane = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
-    return std::array<int, 3>{
-        static_cast<int>(brick / plane),
-        static_cast<int>((brick / static_cast<std::size_t>(bd[2])) % static_cast<std::size_t>(bd[1])),
-        static_cast<int>(brick % static_cast<std::size_t>(bd[2]))};
-  };
+  const auto brick_coords = [&](std::size_t brick) { return field.BrickCoords(brick); };
   // The kBrickCandidates samples nearest each candidate brick's centre, found once (centre test)
   // and kept for the evaluation.
   std::vector<std::int32_t> candidate_of(n_bricks, -1);

@@ -430,6 +430,8 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
   const auto n_slots = static_cast<std::size_t>(slots);
   const std::int32_t lo = -static_cast<std::int32_t>(m.band_inside) << 16;
   const std::int32_t hi = static_cast<std::int32_t>(m.band_outside) << 16;
+  // Q16.16 -> Q7.8 within the band: nearest, ties up.
+  const auto quantise = [&](std::int32_t v) { return static_cast<std::int16_t>((std::clamp(v, lo, hi) + 128) >> 8); };
   const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
   std::vector<std::uint32_t> index(n_slots), tables;
   // Stored octants, in order, in chunks that never move: a vector grown by doubling held its old
@@ -444,7 +446,7 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
       for (std::uint32_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
         // A brick its source calls uniform: every octant with grid nodes holds this one value.
         if (const std::optional<std::int32_t> all = bricks({bi, bj, bk}, brick)) {
-          index[slot] = Uniform(static_cast<std::int16_t>((std::clamp(*all, lo, hi) + 128) >> 8));
+          index[slot] = Uniform(quantise(*all));
           continue;
         }
         std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
@@ -465,13 +467,12 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
           const std::size_t na = std::min<std::size_t>(kOctant, in[0] - a0);
           const std::size_t nb = std::min<std::size_t>(kOctant, in[1] - b0);
           const std::size_t nc = std::min<std::size_t>(kOctant, in[2] - c0);
-          const auto q0 = static_cast<std::int16_t>((std::clamp(src[0], lo, hi) + 128) >> 8);  // nearest, ties up
+          const std::int16_t q0 = quantise(src[0]);
           bool same = true;
           for (std::size_t a = 0; a < na; ++a)
             for (std::size_t b = 0; b < nb; ++b)
               for (std::size_t c = 0; c < nc; ++c) {
-                const auto q =
-                    static_cast<std::int16_t>((std::clamp(src[(a * kBrick + b) * kBrick + c], lo, hi) + 128) >> 8);
+                const std::int16_t q = quantise(src[(a * kBrick + b) * kBrick + c]);
                 dst[(a * kOctant + b) * kOctant + c] = q;
                 same = same && q == q0;
               }

@@ -37,6 +37,8 @@ class SparseField {
                static_cast<std::size_t>(brick_dims_[2]) +
            static_cast<std::size_t>(bk);
   }
+  // (bi, bj, bk) of brick index `brick`: the inverse of BrickIndex.
+  std::array<int, 3> BrickCoords(std::size_t brick) const;
   std::int32_t Slot(std::size_t brick) const { return slots_[brick]; }
   void SetUniform(std::size_t brick, bool inside) { slots_[brick] = inside ? kUniformInside : kUniformOutside; }
   // Allocates (if needed) the brick's values and returns them: kBrickNodes floats, local index
@@ -112,7 +114,6 @@ class SparseField {
     }
   };
   BrickBox Box(int bi, int bj, int bk) const;
-  std::array<int, 3> BrickCoords(std::size_t brick) const;
   // 10^3 halo of a brick's nodes and its 6 face neighbours (NaN where there is no grid node).
   void GatherHalo(std::size_t brick, float* halo) const;
 
