@@ -479,5 +479,64 @@ TEST(Winding, OneSidedScanIsClosedRoundBelowItsRim) {
   EXPECT_EQ(wrong, 0u) << "of " << checked;
 }
 
+// Issue 20: a sphere scanned only above z = -0.17 r (nothing below it in the grid fitted to the
+// samples, which ends ~0.4 r above the sphere's bottom). The closure leaves the grid's bottom face,
+// so BuildField grows the grid, voxel kept, to hold it; past the rim, where w falls to ~0.2, the
+// rim's inner balls close the sphere round. Every node more than a band from the sphere has the
+// ball's sign, and no face node is inside. Without the growth the grid cuts the sphere flat: its
+// bottom face layer, inside the true sphere, is outside.
+TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
+  const auto pts = ReadPoints(DataFile("sphere926.pwn"));
+  ASSERT_TRUE(pts) << pts.error().message;
+  const double r = 0.03;
+  std::vector<Eigen::Vector3d> p, n;
+  for (std::size_t i = 0; i < pts->positions.size(); ++i)
+    if (pts->positions[i].z() > -0.17 * pts->positions[i].norm()) {
+      p.push_back(3e-3 * pts->positions[i]);
+      n.push_back(pts->normals[i]);
+    }
+  const auto wrong_and_faces = [&](const BuildResult& built) {
+    const SparseField& f = built.field;
+    const GridSpec& g = f.grid();
+    std::size_t face_inside = 0, wrong = 0;
+    for (int i = 0; i < g.dims[0]; ++i)
+      for (int j = 0; j < g.dims[1]; ++j)
+        for (int k = 0; k < g.dims[2]; ++k) {
+          const bool inside = f.Value(i, j, k) <= 0;
+          const bool face =
+              i == 0 || j == 0 || k == 0 || i == g.dims[0] - 1 || j == g.dims[1] - 1 || k == g.dims[2] - 1;
+          if (face && inside) ++face_inside;
+          const Eigen::Vector3d x = g.Node(i, j, k);
+          if (std::abs(x.norm() - r) / g.voxel_m <= g.band_voxels) continue;
+          wrong += inside != (x.norm() < r) ? 1u : 0u;
+        }
+    return std::pair{wrong, face_inside};
+  };
+  BuildOptions options;
+  options.grid.cells = 96;
+  const auto built = BuildField(p, n, options);
+  ASSERT_TRUE(built) << built.error().message;
+  const GridSpec& g = built->field.grid();
+  EXPECT_GT(built->grid_grown_from[2], 0);
+  EXPECT_GT(g.dims[2], built->grid_grown_from[2]);
+  EXPECT_LT(g.origin_m.z(), -r);  // the whole sphere is in the grid
+  const auto [wrong, face_inside] = wrong_and_faces(*built);
+  EXPECT_EQ(face_inside, 0u);
+  EXPECT_EQ(wrong, 0u);
+  // The reported area counts the closing surface in the bricks no sample reaches (here sparse
+  // samples reach most of the cap): a lower bound of the cap's 2 pi r (0.83 r).
+  const double cap = 2.0 * std::numbers::pi * r * 0.83 * r;
+  EXPECT_GT(built->hermite.closed_area_m2, 0.1 * cap);
+  EXPECT_LT(built->hermite.closed_area_m2, cap);
+
+  options.grow_for_closure = false;
+  const auto cut = BuildField(p, n, options);
+  ASSERT_TRUE(cut) << cut.error().message;
+  EXPECT_EQ(cut->grid_grown_from[0], 0);
+  const auto [cut_wrong, cut_faces] = wrong_and_faces(*cut);
+  EXPECT_EQ(cut_faces, 0u);
+  EXPECT_GT(cut_wrong, 1000u);
+}
+
 }  // namespace
 }  // namespace palpa::field

@@ -251,7 +251,9 @@ int RunBuild(const BuildArgs& args) {
   // Issue 20: say when the scan is open (the winding number closed a surface where no sample
   // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
   const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
-  const bool open_scan = built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0;
+  const bool grown = built.grid_grown_from[0] > 0;
+  const bool open_scan =
+      built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_closed > 0 || grown;
   // Every method takes the inside from the normals' sign; say so when the file's normals disagree
   // (also with -q: the field is then wrong near those points). An open scan's far side is no
   // evidence (OrientationReport::OpenScanInconsistent).
@@ -271,9 +273,15 @@ int RunBuild(const BuildArgs& args) {
                "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
                "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
                args.points, built.hermite.closed_area_m2 * 1e6, closed,
-               built.hermite.face_nodes_closed > 0
-                   ? fmt::format(", and at the grid faces ({} face nodes set outside)", built.hermite.face_nodes_closed)
-                   : std::string());
+               (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "
+                                    "closed side",
+                                    built.grid_grown_from[0], built.grid_grown_from[1], built.grid_grown_from[2],
+                                    built.field.grid().dims[0], built.field.grid().dims[1], built.field.grid().dims[2])
+                      : std::string()) +
+                   (built.hermite.face_nodes_closed > 0
+                        ? fmt::format(", and it was cut at the grid faces ({} face nodes set outside)",
+                                      built.hermite.face_nodes_closed)
+                        : std::string()));
   }
   const field::GridSpec g = built.field.grid();  // a copy: the field is handed to the encoder below
   const std::size_t field_bricks = built.field.AllocatedBricks();

@@ -6,6 +6,7 @@
 #include <new>
 
 #include <fmt/format.h>
+#include <Eigen/Geometry>
 
 #include "palpa/field/edt_field.h"
 #include "palpa/field/erosion_field.h"
@@ -16,6 +17,11 @@ namespace palpa::field {
 namespace {
 
 constexpr std::size_t kMinPoints = 4;
+// How far past the samples' grid an open scan's closure may grow it, per side, as a share of
+// the samples' longest bounding-box side: a sphere scanned above 0.17 R needs 0.42; an open sheet's
+// huge inner balls would otherwise grow it without bound.
+constexpr double kClosureReach = 0.5;
+constexpr int kClosureGrowths = 2;
 
 // Share of the total progress at the end of each stage (rough typical cost).
 constexpr double kProgressPacked = 0.4;
@@ -70,6 +76,31 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     HermiteOptions hermite_options;
     hermite_options.leak_guard = options.leak_guard;
     result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
+    // An open scan closed at the grid faces: grow the grid, voxel kept, to hold the closure
+    // (issue 20: no inside node on a grid face, and no flat cut where the closure goes on). Not
+    // when the normals disagree: the closure then follows flipped samples (data/cube.pwn: a
+    // grid 4.2 times larger, 26 s instead of 9, and still cut at its faces). A second closure may
+    // reach farther than the first lattice saw: up to kClosureGrowths rounds.
+    const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);
+    Eigen::AlignedBox3d hold(lo, hi);  // what the grid must hold: the samples and their closure
+    for (int round = 0; round < kClosureGrowths && options.grow_for_closure && stats.face_nodes_closed > 0 &&
+                        !result.orientation.OpenScanInconsistent();
+         ++round) {
+      const auto closure = ClosureBeyondGrid(*grid, device_positions, unit_normals, stats.inner, reach.x());
+      if (!closure) break;
+      hold.extend(*closure);
+      hold = hold.intersection(Eigen::AlignedBox3d(lo - reach, hi + reach));
+      GridOptions grown = options.grid;
+      grown.voxel_m = grid->voxel_m;
+      auto bigger = MakeGrid({hold.min(), hold.max()}, grown);
+      if (!bigger || bigger->NodeCount() <= grid->NodeCount()) break;
+      const double seconds = stats.seconds_packing + stats.seconds_distance;
+      if (round == 0) result.grid_grown_from = grid->dims;
+      grid = std::move(bigger);
+      stats = {};
+      result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
+      stats.seconds_distance += seconds;  // the earlier passes count as distance time
+    }
     result.packing = std::move(stats.inner);
     stats.inner = {};
     stats.outer = {};

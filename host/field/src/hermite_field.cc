@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <span>
 #include <utility>
 
@@ -51,6 +52,16 @@ constexpr double kWindingClear = 0.2;
 constexpr double kBallClosingWinding = 0.5 - kWindingClear;
 // Inner balls tried per query (those of the samples nearest it).
 constexpr std::size_t kClosingBalls = 16;
+// Beside a rim (RimSamples) the inner balls close down to this w.
+constexpr double kRimClosingWinding = 0.1;
+constexpr std::size_t kRimNeighbours = 16;
+// RimSamples: the widest angular gap between a sample's neighbours on its tangent plane, and w
+// probed kRimProbeSpacings neighbour distances past the sample across that gap. An open sphere's
+// rim probes 0.17-0.21, the edges and tips of closed thin parts (CGAL's bull: ears, horns) 0.05
+// or less for 8 in 10.
+constexpr double kRimGap = 150.0 * std::numbers::pi / 180.0;
+constexpr double kRimProbeSpacings = 2.0;
+constexpr double kRimProbeWinding = 0.1;
 constexpr double kOpenFaceWinding = 0.1;
 // Samples considered per 8^3 brick: the nearest to its centre. They hold every node's few nearest
 // samples, and their balls form the bracket (any subset of the balls gives valid bounds).
@@ -625,6 +636,90 @@ std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, con
 
 namespace {
 
+// Samples on the rim of an open scan (issue 20): projected on the sample's tangent plane, its
+// kRimNeighbours nearest samples leave an angular gap wider than kRimGap (inside a surface the
+// widest gap between 16 random neighbours exceeds 150 degrees with probability ~16 (1 - 150/360)^15
+// = 0.5 %; on a rim it is about 180), and the samples' winding number w a little past the sample
+// across that gap is at least kRimProbeWinding: past a rim the point sees the hole, past the edge
+// or tip of a closed thin part it is outside (w ~ 0).
+std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& positions,
+                                     const std::vector<V3>& normals, const WindingNumber& winding) {
+  std::vector<std::uint8_t> rim(positions.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
+    std::array<std::size_t, kRimNeighbours + 1> idx{};
+    std::array<double, kRimNeighbours + 1> d2{};
+    std::array<double, kRimNeighbours + 1> angle{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const V3& n = normals[i];
+      const V3 u = n.unitOrthogonal();
+      const V3 v = n.cross(u);
+      const std::size_t got = tree.knnSearch(positions[i].data(), kRimNeighbours + 1, idx.data(), d2.data());
+      std::size_t m = 0;
+      for (std::size_t q = 0; q < got; ++q) {
+        if (idx[q] == i) continue;
+        const V3 d = positions[idx[q]] - positions[i];
+        const double x = d.dot(u), y = d.dot(v);
+        if (x * x + y * y > 0.0) angle[m++] = std::atan2(y, x);
+      }
+      if (m < 3) continue;
+      std::sort(angle.begin(), angle.begin() + static_cast<std::ptrdiff_t>(m));
+      double gap = angle[0] + 2.0 * std::numbers::pi - angle[m - 1];
+      double mid = angle[m - 1] + 0.5 * gap;
+      for (std::size_t q = 1; q < m; ++q)
+        if (angle[q] - angle[q - 1] > gap) {
+          gap = angle[q] - angle[q - 1];
+          mid = angle[q - 1] + 0.5 * gap;
+        }
+      if (gap <= kRimGap) continue;
+      const V3 across = std::cos(mid) * u + std::sin(mid) * v;
+      const V3 beyond = positions[i] + kRimProbeSpacings * std::sqrt(d2[got - 1]) * across;
+      rim[i] = winding(beyond) >= kRimProbeWinding ? 1 : 0;
+    }
+  });
+  return rim;
+}
+
+// The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
+// or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
+// samples nearest it. Unclear is w >= kBallClosingWinding, or w >= kRimClosingWinding where the
+// nearest sample lies on a rim (RimSamples): past an open side's rim w falls towards 0.2 on the
+// missing part (a sphere scanned above -0.17 R: 0.18 at its lowest point), and only there do the
+// rim's balls continue the surface. Used by LabelByWinding and ClosureBeyondGrid alike.
+class ClosingRule {
+ public:
+  ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
+              const std::vector<V3>& positions, const std::vector<V3>& normals)
+      : tree_(tree), inner_(inner), rim_(rim), positions_(positions), normals_(normals) {}
+  struct Balls {
+    double phi = std::numeric_limits<double>::infinity();  // metres; +infinity: the test does not apply
+    double threshold = kBallClosingWinding;                // the w below which the balls do not close
+  };
+  // Signed distance to the union of the inner balls of the samples nearest p, where w is unclear.
+  Balls BallPhi(double w, const V3& p) const {
+    if (w >= 0.5 || w < kRimClosingWinding) return {};
+    std::array<std::size_t, kClosingBalls> idx{};
+    std::array<double, kClosingBalls> d2{};
+    const std::size_t got = tree_.knnSearch(p.data(), kClosingBalls, idx.data(), d2.data());
+    if (got == 0) return {};
+    // Beyond a rim, the missing part lies behind the rim's tangent plane.
+    const bool beyond_rim = rim_[idx[0]] != 0 && (p - positions_[idx[0]]).dot(normals_[idx[0]]) < 0.0;
+    const double threshold = beyond_rim ? kRimClosingWinding : kBallClosingWinding;
+    if (w < threshold) return {};
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t m = 0; m < got; ++m)
+      best = std::min(best, (p - inner_.centres[idx[m]]).norm() - inner_.radii[idx[m]]);
+    return {best, threshold};
+  }
+  bool Inside(double w, const V3& p) const { return w >= 0.5 || BallPhi(w, p).phi < 0.0; }
+
+ private:
+  const KdTree& tree_;
+  const Packing& inner_;
+  const std::vector<std::uint8_t>& rim_;
+  const std::vector<V3>& positions_;
+  const std::vector<V3>& normals_;
+};
+
 // Inside/outside of every brick the evaluation left unallocated, from the winding number of the
 // samples (issue 20; replaces the majority vote of LabelUnallocatedBricks, which a hole, an open
 // scan or an outlier turns into phantom solid far from the surface). Inside is w >= 1/2, or w
@@ -649,19 +744,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const std::array<std::size_t, 3> cd = {static_cast<std::size_t>(bd[0]) + 1, static_cast<std::size_t>(bd[1]) + 1,
                                          static_cast<std::size_t>(bd[2]) + 1};
   const auto node_at = [&](double i, double j, double k) { return V3(grid.origin_m + h * V3(i, j, k)); };
-  // Signed distance (metres) to the union of the inner balls of the samples nearest p.
-  const auto ball_phi = [&](const V3& p) {
-    std::array<std::size_t, kClosingBalls> idx{};
-    std::array<double, kClosingBalls> d2{};
-    const std::size_t got = tree.knnSearch(p.data(), kClosingBalls, idx.data(), d2.data());
-    double best = std::numeric_limits<double>::infinity();
-    for (std::size_t m = 0; m < got; ++m)
-      best = std::min(best, (p - st.inner.centres[idx[m]]).norm() - st.inner.radii[idx[m]]);
-    return best;
-  };
-  const auto inside_at = [&](double w, const V3& p) {
-    return w >= 0.5 || (w >= kBallClosingWinding && ball_phi(p) < 0.0);
-  };
+  const std::vector<std::uint8_t> rim = RimSamples(tree, positions, normals, winding);
+  const ClosingRule rule(tree, st.inner, rim, positions, normals);
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
   std::vector<std::uint8_t> corner_in(corner_w.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
@@ -672,7 +756,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           const V3 p = node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB));
           const double w = winding(p);
           corner_w[c] = static_cast<float>(w);
-          corner_in[c] = inside_at(w, p) ? 1 : 0;
+          corner_in[c] = rule.Inside(w, p) ? 1 : 0;
         }
   });
   const auto plane_bricks = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
@@ -711,6 +795,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<double> w(static_cast<std::size_t>(kH * kH * kH));
     // Signed distance to the inner balls (voxels) where w is unclear; +infinity elsewhere.
     std::vector<double> balls(w.size());
+    std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
       const auto [bi, bj, bk] = field.BrickCoords(b);
@@ -720,8 +805,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
             const V3 q = node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
             w[x] = winding(q);
-            balls[x] =
-                w[x] >= kBallClosingWinding && w[x] < 0.5 ? ball_phi(q) / h : std::numeric_limits<double>::infinity();
+            const ClosingRule::Balls ball = rule.BallPhi(w[x], q);
+            balls[x] = ball.phi / h;
+            threshold[x] = ball.threshold;
           }
       float* values = field.BrickValues(b);
       const auto at = [&](int a, int c, int e) { return w[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
@@ -737,7 +823,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             const bool inside = in_at(a, c, e);
             double phi = gn > 1e-12 ? (0.5 - here) / gn : (here >= 0.5 ? -band : band);
             if (std::isfinite(ball_at(a, c, e)))  // the union with {w unclear} within the balls
-              phi = std::min(phi, std::max(gn > 1e-12 ? (kBallClosingWinding - here) / gn : -band, ball_at(a, c, e)));
+              phi = std::min(
+                  phi, std::max(gn > 1e-12 ? (threshold[static_cast<std::size_t>((a * kH + c) * kH + e)] - here) / gn
+                                           : -band,
+                                ball_at(a, c, e)));
             phi = std::clamp(phi, -static_cast<double>(band), static_cast<double>(band));
             if (inside && phi > 0.0) phi = 0.0;  // keep the decided side
             values[((a - 1) * kB + (c - 1)) * kB + (e - 1)] =
@@ -765,7 +854,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::size_t local = 0;
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::array<float, 8> w = corners(evaluated[m]);
-      const bool out = std::all_of(w.begin(), w.end(), [](float x) { return x < kWindingSure; });
+      bool closed = false;  // a corner that the rim's balls close
+      for (std::size_t c = 0; c < 8; ++c) closed = closed || corner_in[corner_index(evaluated[m], c)] != 0;
+      const bool out = !closed && std::all_of(w.begin(), w.end(), [](float x) { return x < kWindingSure; });
       const bool in = std::all_of(w.begin(), w.end(), [](float x) { return x > 1.0f - kWindingSure; });
       if (!out && !in) continue;
       float* values = field.BrickValues(evaluated[m]);
@@ -820,6 +911,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             if (ds <= trust) continue;
             const double w = winding(p);
             if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
+            if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
             const float mag = std::min(band, static_cast<float>(ds / h));
             x = w >= 0.5 ? -mag : mag;
             ++local;
@@ -859,10 +951,57 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
               ++closed;
             }
       }
+
   st.face_nodes_closed = closed + far_faces.load();
 }
 
 }  // namespace
+
+std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const std::vector<V3>& positions,
+                                                     const std::vector<V3>& normals, const Packing& inner,
+                                                     double reach_m) {
+  const std::size_t n = positions.size();
+  if (n < 2 || normals.size() != n || inner.centres.size() != n || !(grid.voxel_m > 0.0) || !(reach_m > 0.0))
+    return std::nullopt;
+  const double step = 0.5 * SparseField::kBrick * grid.voxel_m;
+  const V3 grid_lo = grid.origin_m;
+  const V3 grid_hi = grid.Node(grid.dims[0] - 1, grid.dims[1] - 1, grid.dims[2] - 1);
+  // Nothing the rule puts inside lies outside the union of the inner balls.
+  V3 balls_lo = V3::Constant(std::numeric_limits<double>::infinity());
+  V3 balls_hi = -balls_lo;
+  for (std::size_t i = 0; i < n; ++i) {
+    balls_lo = balls_lo.cwiseMin(inner.centres[i] - V3::Constant(inner.radii[i]));
+    balls_hi = balls_hi.cwiseMax(inner.centres[i] + V3::Constant(inner.radii[i]));
+  }
+  const V3 lo = balls_lo.cwiseMax(grid_lo - V3::Constant(reach_m));
+  const V3 hi = balls_hi.cwiseMin(grid_hi + V3::Constant(reach_m));
+  if ((lo.array() >= grid_lo.array()).all() && (hi.array() <= grid_hi.array()).all()) return std::nullopt;
+  std::array<int, 3> count{};
+  for (Eigen::Index a = 0; a < 3; ++a)
+    count[static_cast<std::size_t>(a)] = std::max(1, static_cast<int>(std::ceil((hi[a] - lo[a]) / step)) + 1);
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const WindingNumber winding(positions, normals, SampleAreas(positions, kAreaNeighbours));
+  const std::vector<std::uint8_t> rim = RimSamples(tree, positions, normals, winding);
+  const ClosingRule rule(tree, inner, rim, positions, normals);
+  tbb::enumerable_thread_specific<Eigen::AlignedBox3d> boxes;
+  tbb::parallel_for(tbb::blocked_range<int>(0, count[0]), [&](const auto& r) {
+    Eigen::AlignedBox3d& box = boxes.local();
+    for (int i = r.begin(); i != r.end(); ++i)
+      for (int j = 0; j < count[1]; ++j)
+        for (int k = 0; k < count[2]; ++k) {
+          const V3 p = lo + step * V3(i, j, k);
+          if ((p.array() >= grid_lo.array()).all() && (p.array() <= grid_hi.array()).all()) continue;
+          if (rule.Inside(winding(p), p)) box.extend(p);
+        }
+  });
+  Eigen::AlignedBox3d box;
+  for (const Eigen::AlignedBox3d& b : boxes)
+    if (!b.isEmpty()) box.extend(b);
+  if (box.isEmpty()) return std::nullopt;
+  // The lattice may miss up to a step of the inside past its last node.
+  return Eigen::AlignedBox3d(box.min() - V3::Constant(step), box.max() + V3::Constant(step));
+}
 
 SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions, const std::vector<V3>& normals,
                          double r_max, const HermiteOptions& options, HermiteStats* stats) {

@@ -6,6 +6,7 @@
 //   kErosion: packing -> indicator -> erosion (paper §3.2 eq. 4), the reference.
 #pragma once
 
+#include <array>
 #include <expected>
 #include <functional>
 #include <string_view>
@@ -33,16 +34,21 @@ struct BuildOptions {
   FieldMethod method = FieldMethod::kHermite;
   // kHermite: the leak guard (hermite_field.h). erosion and edt always use the paper's raw packing.
   bool leak_guard = true;
+  // kHermite: when the field of an open scan is closed at the grid's faces, grow the grid (same
+  // voxel, up to half the samples' longest side per side) to hold the closure, and build again
+  // (ClosureBeyondGrid). false keeps the grid fitted to the samples.
+  bool grow_for_closure = true;
 };
 
 struct BuildResult {
-  SparseField field;              // voxels, negative inside, clamped to +-band
-  Transform transform;            // identity: the caller passed device (already fitted) positions
-  Packing packing;                // metres; for kHermite the guarded inner balls
-  std::size_t inside_nodes = 0;   // nodes with phi <= 0
-  std::size_t balls_shrunk = 0;   // kHermite: inner + outer balls shrunk by the leak guard
-  HermiteStats hermite;           // kHermite: the method's counters (its packings moved to `packing`)
-  OrientationReport orientation;  // every method: are the normals consistently outward?
+  SparseField field;                     // voxels, negative inside, clamped to +-band
+  Transform transform;                   // identity: the caller passed device (already fitted) positions
+  Packing packing;                       // metres; for kHermite the guarded inner balls
+  std::size_t inside_nodes = 0;          // nodes with phi <= 0
+  std::size_t balls_shrunk = 0;          // kHermite: inner + outer balls shrunk by the leak guard
+  HermiteStats hermite;                  // kHermite: the method's counters (its packings moved to `packing`)
+  std::array<int, 3> grid_grown_from{};  // kHermite: the samples' grid, when grown for a closure; else 0s
+  OrientationReport orientation;         // every method: are the normals consistently outward?
   double seconds_packing = 0.0;
   double seconds_indicator = 0.0;  // kErosion, kEdt only
   double seconds_distance = 0.0;
@@ -51,7 +57,9 @@ struct BuildResult {
 // Builds the field of oriented points already in device coordinates (metres; see FitTransform).
 // Packing uses r_max = longest bounding-box side of `device_positions`. Normals are normalised
 // here. `progress`, if set, is called on the calling thread only with non-decreasing values in
-// [0, 1], ending with 1. Deterministic: any thread count gives bit-identical fields.
+// [0, 1], ending with 1. Deterministic: any thread count gives bit-identical fields. kHermite:
+// the grid is MakeGrid's around the positions, grown (same voxel) to hold an open scan's closure
+// when options.grow_for_closure (BuildResult::grid_grown_from).
 // Errors: size mismatch; fewer than 4 points; non-finite position; zero or non-finite normal;
 // any MakeGrid error; out of memory.
 std::expected<BuildResult, Error> BuildField(const std::vector<Eigen::Vector3d>& device_positions,

@@ -28,17 +28,22 @@
 // samples (winding.h, issue 20): uniform where w is on one side of 1/2 at all 8 corners, else
 // phi = (1/2 - w) / |grad w| per node (the smooth closure of a hole or an unscanned side);
 // evaluated nodes clamped to the band edge take w's side where all 8 corners are sure of it
-// (< 0.3 or > 0.7), and no node on a grid face stays inside. Last SparseField::ProjectLipschitz makes every
-// axis neighbour difference <= 1 voxel, as the proxy's sphere tracing needs: the per-node formula
-// alone breaks that by up to ~2.5 voxels where patches meet or the bracket clamps.
+// (< 0.3 or > 0.7), and no node on a grid face stays inside. Where w is unclear (0.3 <= w < 1/2,
+// or down to 0.1 behind a rim sample: an open scan's missing side) the inner balls of the nearest
+// samples decide, so the closure continues the scanned curvature (ClosureBeyondGrid). Last
+// SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the proxy's
+// sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
+// patches meet or the bracket clamps.
 // Deterministic for any thread count (every node is computed independently, ties broken by
 // sample index; the projection's result does not depend on its order).
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "palpa/field/grid.h"
 #include "palpa/field/packing.h"
@@ -92,6 +97,19 @@ std::vector<double> SampleSpacing(const std::vector<Eigen::Vector3d>& positions,
 std::size_t GuardPacking(Packing& packing, const std::vector<Eigen::Vector3d>& positions,
                          const std::vector<Eigen::Vector3d>& ball_normals, const std::vector<double>& spacing,
                          double disc_spacings, double tolerance);
+
+// An open scan's closure beyond `grid` (issue 20). LabelByWinding closes an unscanned side by the
+// samples' winding number w (inside where w >= 1/2) and, where w is unclear (0.3 <= w < 1/2), by
+// the guarded inner balls `inner` (HermiteStats::inner) of the 16 samples nearest: the closure
+// follows the scanned part's curvature and may reach past the grid fitted to the samples, where
+// the grid faces would cut it flat. Returns the box (metres) holding every node of a lattice of
+// half a brick (4 voxels) that the rule puts inside outside `grid`, within `reach_m` of the
+// grid's box, widened by one lattice step; std::nullopt when there is none. positions and unit
+// normals in metres, same size as inner's balls. Deterministic, parallel.
+std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid,
+                                                     const std::vector<Eigen::Vector3d>& positions,
+                                                     const std::vector<Eigen::Vector3d>& normals, const Packing& inner,
+                                                     double reach_m);
 
 // The default method's field on `grid` from unit-normal oriented points in grid units (metres).
 // r_max caps the packed balls as in PackSpheres. Values in voxels, clamped to +-band, axis
