@@ -2,8 +2,9 @@
 # Field build speed and scale (issue 5), every figure in one run so that ratios are fair:
 #   bench/field/run.sh [BUILD_DIR]        (default build/field-bench; Release)
 # Builds `palpa` and the field benchmarks, then runs bench/field/measure.py, which prints:
-#   - whole `palpa build data/kitten.xyz` at 150, 300 and 600 cells: wall time and peak RSS
-#     (/usr/bin/time -v), blob size, time(600)/time(300);
+#   - whole `palpa build data/kitten.xyz` at 150, 300, 600 and 1,200 cells: wall time and peak
+#     RSS (/usr/bin/time -v), blob size, time(600)/time(300), time(1200)/time(600);
+#   - `palpa mesh` and `palpa export --npy` of the 1,200-cell blob: wall, peak RSS, output size;
 #   - scipy.ndimage.distance_transform_edt alone on the 300-cell grid, and the ratio;
 #   - palpa build at 300 cells with 1 and 2 TBB threads;
 #   - stage times (packing, patches, centre tests, evaluation, projection) at 150/300/600 cells;

@@ -2,6 +2,7 @@
 // closedness, topology (Euler characteristic), normals, and the PLY/OBJ writers.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <set>
@@ -9,6 +10,7 @@
 
 #include "field_fixtures.h"
 #include "palpa/blob/blob.h"
+#include "palpa/mesh/field_file.h"
 #include "palpa/mesh/iso_surface.h"
 #include "tools_test_util.h"
 
@@ -202,6 +204,41 @@ TEST_F(Sphere926Mesh, EveryVertexWithinATenthOfAVoxelOfRadiusTenAndClosed) {
   EXPECT_LE(worst, 0.1);
   EXPECT_TRUE(mesh::CheckClosedOriented(*m, "surface"));
   EXPECT_EQ(EulerCharacteristic(*m), 2);
+}
+
+// Issue 21: palpa mesh reads a v2 blob in place (no dense copy: memory follows the band, and
+// OpenVDB gets leaves only where an edge can cross the surface). The mesh is the one of the
+// blob::DenseV1 grid of the same field, vertex for vertex and bit for bit, and PhiRangeQ16 (block
+// by block, in place) is the dense grid's range.
+TEST_F(Sphere926Mesh, InPlaceV2MeshIsTheDenseGridsMeshBitForBit) {
+  const std::string field = Path("s926v2.palpa");
+  const Outcome b = Palpa("build " + DataFile("sphere926.pwn").string() + " -o " + field + " --cells 150 -q");
+  ASSERT_EQ(b.code, 0) << b.out;
+  auto stored = blob::ReadFile(field.c_str(), blob::Load::kAsStored);
+  ASSERT_TRUE(stored.has_value());
+  const auto v2 = blob::Verify(*stored);
+  ASSERT_TRUE(v2.has_value()) << v2.error().what();
+  ASSERT_EQ(v2->version, blob::kVersion2);
+  const std::vector<std::byte> dense_bytes = blob::DenseV1(*v2);
+  const auto v1 = blob::Verify(dense_bytes);
+  ASSERT_TRUE(v1.has_value()) << v1.error().what();
+
+  const std::vector<std::int32_t> dense = blob::DenseQ16(*v1);
+  const auto [lo, hi] = std::minmax_element(dense.begin(), dense.end());
+  EXPECT_EQ(mesh::PhiRangeQ16(*v2), std::make_pair(*lo, *hi));
+  EXPECT_EQ(mesh::PhiRangeQ16(*v1), std::make_pair(*lo, *hi));
+
+  auto in_place = mesh::ExtractZeroSurface(*v2);
+  auto from_dense = mesh::ExtractZeroSurface(*v1);
+  ASSERT_TRUE(in_place) << in_place.error().message;
+  ASSERT_TRUE(from_dense) << from_dense.error().message;
+  ASSERT_EQ(in_place->vertices.size(), from_dense->vertices.size());
+  ASSERT_EQ(in_place->faces, from_dense->faces);
+  for (std::size_t v = 0; v < in_place->vertices.size(); ++v) {
+    ASSERT_EQ(in_place->vertices[v], from_dense->vertices[v]) << v;
+    ASSERT_EQ(in_place->normals[v], from_dense->normals[v]) << v;
+  }
+  EXPECT_EQ(mesh::ToPly(*in_place), mesh::ToPly(*from_dense));
 }
 
 }  // namespace

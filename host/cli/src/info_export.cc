@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cstring>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -9,6 +10,7 @@
 #include "atomic_file.h"
 #include "commands.h"
 #include "palpa/blob/blob.h"
+#include "palpa/mesh/field_file.h"
 
 namespace palpa::cli {
 namespace {
@@ -104,26 +106,33 @@ int RunExport(const std::string& path, const std::string& npy) {
   const std::size_t unpadded = 10 + header.size() + 1;
   header.append((64 - unpadded % 64) % 64, ' ');
   header.push_back('\n');
-  const std::size_t count =
-      static_cast<std::size_t>(v.dims[0]) * static_cast<std::size_t>(v.dims[1]) * static_cast<std::size_t>(v.dims[2]);
-  std::vector<std::byte> out(10 + header.size() + 4 * count);
   const unsigned char preamble[8] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0};
-  std::memcpy(out.data(), preamble, 8);
+  std::vector<std::byte> head(10 + header.size());
+  std::memcpy(head.data(), preamble, 8);
   const auto hlen = static_cast<std::uint16_t>(header.size());
-  std::memcpy(out.data() + 8, &hlen, 2);
-  std::memcpy(out.data() + 10, header.data(), header.size());
-  std::byte* data = out.data() + 10 + header.size();
+  std::memcpy(head.data() + 8, &hlen, 2);
+  std::memcpy(head.data() + 10, header.data(), header.size());
+  auto out = AtomicOutput::Create(npy, {path});
+  if (!out) {
+    fmt::print(stderr, "palpa export: {}\n", out.error());
+    return kExitIo;
+  }
+  auto written = out->Append(head);
   // Either version as the dense v1 grid the host tools see (docs/blob-format.md § Tools and v2):
   // v2 values clamped to ±max(band_inside, band_outside), so free-space bounds read as the band.
-  std::vector<std::int32_t> q16 = blob::DenseQ16(v);
-  const std::int32_t band = std::max(v.band_voxels, v.band_outside) << 16;
-  for (std::int32_t& x : q16) x = std::clamp(x, -band, band);
-  for (std::size_t n = 0; n < count; ++n) {
-    const float metres = static_cast<float>(static_cast<double>(q16[n]) / 65536.0 * v.voxel_m);
-    std::memcpy(data + 4 * n, &metres, 4);
+  // Read in place and written one x-layer at a time: memory is the blob and one layer, whatever
+  // the output's size (issue 21).
+  std::vector<float> layer(static_cast<std::size_t>(v.dims[1]) * static_cast<std::size_t>(v.dims[2]));
+  for (int i = 0; i < v.dims[0] && written; ++i) {
+    std::size_t n = 0;
+    for (int j = 0; j < v.dims[1]; ++j)
+      for (int k = 0; k < v.dims[2]; ++k)
+        layer[n++] = static_cast<float>(static_cast<double>(mesh::PhiQ16(v, i, j, k)) / 65536.0 * v.voxel_m);
+    written = out->Append(std::as_bytes(std::span(layer)));  // little-endian host (palpa/fixed/q.h)
   }
-  if (auto w = WriteFileAtomically(npy, out, {path}); !w) {
-    fmt::print(stderr, "palpa export: {}\n", w.error());
+  if (written) written = out->Commit();
+  if (!written) {
+    fmt::print(stderr, "palpa export: {}\n", written.error());
     return kExitIo;
   }
   return kExitOk;

@@ -21,7 +21,7 @@ int RunMesh(const MeshArgs& args) {
     fmt::print(stderr, "palpa mesh: {}: unknown extension '{}'; use .ply or .obj\n", args.output, ext);
     return kExitBadInput;
   }
-  auto field = mesh::LoadField(args.field);
+  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 meshed in place
   if (!field) {
     fmt::print(stderr, "palpa mesh: {}\n", field.error().message);
     return kExitBadInput;
@@ -33,7 +33,17 @@ int RunMesh(const MeshArgs& args) {
   }
   std::expected<void, std::string> written;
   if (ext == ".ply") {
-    written = WriteFileAtomically(args.output, mesh::ToPly(*surface), {args.field});
+    // Streamed: the output is never whole in memory (issue 21).
+    auto out = AtomicOutput::Create(args.output, {args.field});
+    if (!out) {
+      written = std::unexpected(std::move(out.error()));
+    } else {
+      mesh::WritePly(*surface, [&](std::span<const std::byte> bytes) {
+        written = out->Append(bytes);
+        return written.has_value();
+      });
+      if (written) written = out->Commit();
+    }
   } else {
     const std::string text = mesh::ToObj(*surface);
     written = WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {args.field});

@@ -7,10 +7,13 @@
 
 #include <dlfcn.h>
 #include <fmt/core.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <filesystem>
+#include <functional>
 #include <mutex>
+#include <span>
 #include <string>
 
 #include "iso_surface_internal.h"
@@ -117,17 +120,19 @@ std::expected<void, std::string> VolumeToMesh(const blob::FieldView& field, std:
 }  // namespace internal
 
 std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& field) {
-  const std::size_t count = static_cast<std::size_t>(field.dims[0]) * static_cast<std::size_t>(field.dims[1]) *
-                            static_cast<std::size_t>(field.dims[2]);
-  const auto [lo, hi] = std::minmax_element(field.phi, field.phi + count);
-  if (*lo > 0 || *hi <= 0)
+  const auto [lo, hi] = PhiRangeQ16(field);
+  if (lo > 0 || hi <= 0)
     return std::unexpected(
-        Error{fmt::format("no zero crossing: φ ranges over [{:.3f}, {:.3f}] voxels", *lo / 65536.0, *hi / 65536.0)});
+        Error{fmt::format("no zero crossing: φ ranges over [{:.3f}, {:.3f}] voxels", lo / 65536.0, hi / 65536.0)});
   std::vector<Eigen::Vector3d> points;
   std::vector<std::array<int, 3>> triangles;
   std::vector<std::array<int, 4>> quads;
   if (auto done = internal::VolumeToMesh(field, points, triangles, quads); !done)
     return std::unexpected(Error{done.error()});
+  // OpenVDB's grid and work space are freed by now, but as hundreds of thousands of small blocks
+  // from TBB threads' arenas that glibc keeps: handed back, the peak RSS follows the output
+  // (kitten, 1,200 cells: 880 -> see docs/tools.md).
+  malloc_trim(0);
 
   TriangleMesh m;
   m.faces = std::move(triangles);
@@ -144,26 +149,39 @@ std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& fie
       m.faces.push_back({q[1], q[2], q[3]});
     }
   }
-  m.vertices = points;  // index coordinates until the normals are done
-  OrientOutward(m);     // OpenVDB's winding convention, made explicit: outward by enclosed volume
+  quads = {};                      // memory follows the output (issue 21): no copy outlives its use
+  m.vertices = std::move(points);  // index coordinates until the normals are done
+  OrientOutward(m);                // OpenVDB's winding convention, made explicit: outward by enclosed volume
 
-  std::vector<Eigen::Vector3d> face_sum(points.size(), Eigen::Vector3d::Zero());
-  for (std::size_t f = 0; f < m.faces.size(); ++f) {
-    const Eigen::Vector3d n = FaceNormal(m, f);
-    for (const int v : m.faces[f]) face_sum[static_cast<std::size_t>(v)] += n;
-  }
-  m.normals.resize(points.size());
-  const Eigen::Vector3d origin(field.origin_m[0], field.origin_m[1], field.origin_m[2]);
-  for (std::size_t v = 0; v < points.size(); ++v) {
-    const Eigen::Vector3d g = TrilinearGradient(field, points[v]);
+  // The normalised trilinear gradient; where it vanishes, the mean of the adjacent face normals.
+  m.normals.resize(m.vertices.size());
+  std::vector<std::size_t> flat;
+  for (std::size_t v = 0; v < m.vertices.size(); ++v) {
+    const Eigen::Vector3d g = TrilinearGradient(field, m.vertices[v]);
     const double len = g.norm();
-    m.normals[v] = len > 1e-9 ? Eigen::Vector3d(g / len) : face_sum[v].normalized();
-    m.vertices[v] = origin + field.voxel_m * points[v];
+    if (len > 1e-9) {
+      m.normals[v] = g / len;
+    } else {
+      m.normals[v] = Eigen::Vector3d::Zero();
+      flat.push_back(v);
+    }
   }
+  if (!flat.empty()) {
+    std::vector<std::uint8_t> is_flat(m.vertices.size(), 0);
+    for (const std::size_t v : flat) is_flat[v] = 1;
+    for (std::size_t f = 0; f < m.faces.size(); ++f) {
+      const Eigen::Vector3d n = FaceNormal(m, f);
+      for (const int v : m.faces[f])
+        if (is_flat[static_cast<std::size_t>(v)] != 0) m.normals[static_cast<std::size_t>(v)] += n;
+    }
+    for (const std::size_t v : flat) m.normals[v].normalize();
+  }
+  const Eigen::Vector3d origin(field.origin_m[0], field.origin_m[1], field.origin_m[2]);
+  for (Eigen::Vector3d& x : m.vertices) x = origin + field.voxel_m * x;
   return m;
 }
 
-std::vector<std::byte> ToPly(const TriangleMesh& mesh) {
+bool WritePly(const TriangleMesh& mesh, const std::function<bool(std::span<const std::byte>)>& sink) {
   const bool normals = mesh.normals.size() == mesh.vertices.size() && !mesh.normals.empty();
   std::string header = fmt::format(
       "ply\nformat binary_little_endian 1.0\ncomment palpa mesh: zero iso-surface, device-frame metres\n"
@@ -171,9 +189,16 @@ std::vector<std::byte> ToPly(const TriangleMesh& mesh) {
       mesh.vertices.size());
   if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
   header += fmt::format("element face {}\nproperty list uchar int vertex_indices\nend_header\n", mesh.faces.size());
+  if (!sink(std::as_bytes(std::span(header)))) return false;
+  constexpr std::size_t kChunk = 1 << 20;  // bytes handed to the sink at a time
   std::vector<std::byte> out;
-  out.reserve(header.size() + mesh.vertices.size() * 24 + mesh.faces.size() * 13);
-  Append(out, header.data(), header.size());
+  out.reserve(kChunk + 32);
+  const auto flush = [&](bool force) {
+    if (out.size() < kChunk && !force) return true;
+    const bool ok = out.empty() || sink(out);
+    out.clear();
+    return ok;
+  };
   for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
     std::array<float, 6> row{};
     for (int a = 0; a < 3; ++a) {
@@ -181,13 +206,24 @@ std::vector<std::byte> ToPly(const TriangleMesh& mesh) {
       if (normals) row[static_cast<std::size_t>(a + 3)] = static_cast<float>(mesh.normals[v][a]);
     }
     Append(out, row.data(), (normals ? 6 : 3) * sizeof(float));  // little-endian host (palpa/fixed/q.h)
+    if (!flush(false)) return false;
   }
   for (const auto& f : mesh.faces) {
     const std::uint8_t three = 3;
     Append(out, &three, 1);
     const std::array<std::int32_t, 3> idx{f[0], f[1], f[2]};
     Append(out, idx.data(), sizeof idx);
+    if (!flush(false)) return false;
   }
+  return flush(true);
+}
+
+std::vector<std::byte> ToPly(const TriangleMesh& mesh) {
+  std::vector<std::byte> out;
+  WritePly(mesh, [&](std::span<const std::byte> bytes) {
+    out.insert(out.end(), bytes.begin(), bytes.end());
+    return true;
+  });
   return out;
 }
 

@@ -1,15 +1,17 @@
 // The only translation unit that includes OpenVDB (slow to compile: keep it small), built as the
 // module palpa_vdb.so that iso_surface.cc loads on first use (iso_surface_internal.h says why).
 #include <openvdb/openvdb.h>
-#include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <algorithm>
+#include <array>
 #include <mutex>
+#include <optional>
 #include <type_traits>
 
 #include "iso_surface_internal.h"
+#include "palpa/mesh/field_file.h"
 
 namespace {
 
@@ -17,19 +19,63 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
                   std::vector<std::array<int, 3>>& triangles, std::vector<std::array<int, 4>>& quads) {
   static std::once_flag init;
   std::call_once(init, [] { openvdb::initialize(); });
-  const auto [nx, ny, nz] = field.dims;
-  const std::size_t count = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny) * static_cast<std::size_t>(nz);
-  // The blob's layout is VDB's LayoutZYX (z fastest), so a float copy wraps as a Dense volume.
-  std::vector<float> values(count);
-  for (std::size_t n = 0; n < count; ++n) values[n] = static_cast<float>(field.phi[n]) / 65536.0f;
-  const openvdb::CoordBBox box(openvdb::Coord(0, 0, 0), openvdb::Coord(nx - 1, ny - 1, nz - 1));
-  openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(box, values.data());
-  const auto background = static_cast<float>(field.band_voxels);
+  // Built block by block from the blob as stored (v2 read in place: no dense copy, so memory
+  // follows the band). VDB's leaves are 8^3 nodes, as the blob's bricks, in index space (one VDB
+  // voxel per node). As copyFromDense(tolerance 0) of the dense grid made it, but for the blocks no
+  // crossing edge touches: every node inside the grid whose value is not the background (+band)
+  // is an active voxel; a whole block inside the grid with one value below the background, or
+  // with every value below -2 voxels, is an inactive tile; a block above +2 voxels is left to the
+  // background; outside the grid, the background. The mesh is byte for byte the dense grid's
+  // (kitten and oni, v1 and v2, 300 and 1,200 cells).
+  const auto background = static_cast<float>(std::max(field.band_voxels, field.band_outside));
   auto grid = openvdb::FloatGrid::create(background);
-  grid->setGridClass(openvdb::GRID_LEVEL_SET);  // index space: one VDB voxel per node
-  openvdb::tools::copyFromDense(dense, *grid, 0.0f);
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  {
+    constexpr int kB = palpa::blob::kBrick;
+    constexpr std::int32_t kNoCrossing = 2 * 65536;  // Q16.16 voxels
+    auto acc = grid->getAccessor();
+    std::array<std::int32_t, palpa::blob::kBrickNodes> q16{};
+    const auto to_float = [](std::int32_t q) { return static_cast<float>(q) / 65536.0f; };
+    for (int bi = 0; kB * bi < field.dims[0]; ++bi)
+      for (int bj = 0; kB * bj < field.dims[1]; ++bj)
+        for (int bk = 0; kB * bk < field.dims[2]; ++bk) {
+          const int ni = std::min(kB, field.dims[0] - kB * bi), nj = std::min(kB, field.dims[1] - kB * bj),
+                    nk = std::min(kB, field.dims[2] - kB * bk);
+          const openvdb::Coord origin(kB * bi, kB * bj, kB * bk);
+          const std::optional<std::int32_t> one = palpa::mesh::BlockQ16(field, {bi, bj, bk}, q16);
+          if (one && to_float(*one) == background) continue;
+          if (one && ni == kB && nj == kB && nk == kB) {
+            grid->tree().addTile(1, origin, to_float(*one), false);
+            continue;
+          }
+          if (!one) {
+            // No edge of a block whose nodes are all farther than kNoCrossing from 0 on one side
+            // crosses the surface (neighbour differences are at most a voxel), and volumeToMesh
+            // reads only the values at crossing edges' ends: such a block needs no leaf (half the
+            // leaves of the kitten's band, and with them half of volumeToMesh's work space).
+            bool far_in = true, far_out = true;
+            for (int a = 0; a < ni; ++a)
+              for (int b = 0; b < nj; ++b)
+                for (int c = 0; c < nk; ++c) {
+                  const std::int32_t v = q16[static_cast<std::size_t>((a * kB + b) * kB + c)];
+                  far_in = far_in && v < -kNoCrossing;
+                  far_out = far_out && v > kNoCrossing;
+                }
+            if (far_out) continue;
+            if (far_in && ni == kB && nj == kB && nk == kB) {
+              grid->tree().addTile(1, origin, -background, false);
+              continue;
+            }
+          }
+          for (int a = 0; a < ni; ++a)
+            for (int b = 0; b < nj; ++b)
+              for (int c = 0; c < nk; ++c) {
+                const float v = one ? to_float(*one) : to_float(q16[static_cast<std::size_t>((a * kB + b) * kB + c)]);
+                if (v != background) acc.setValueOn(origin.offsetBy(a, b, c), v);
+              }
+        }
+  }
   openvdb::tools::pruneLevelSet(grid->tree());
-  values = {};
 
   std::vector<openvdb::Vec3s> p;
   std::vector<openvdb::Vec3I> t;
@@ -38,14 +84,17 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
   // rule); OpenVDB itself counts values below the isovalue as inside.
   constexpr double kIso = 0.5 / 65536.0;
   openvdb::tools::volumeToMesh(*grid, p, t, q, kIso, 0.0, true);
+  grid.reset();  // before the copies below: the grid is the largest part of the peak
   points.resize(p.size());
   std::transform(p.begin(), p.end(), points.begin(), [](const openvdb::Vec3s& v) {
     return Eigen::Vector3d(static_cast<double>(v.x()), static_cast<double>(v.y()), static_cast<double>(v.z()));
   });
+  p = {};
   triangles.resize(t.size());
   std::transform(t.begin(), t.end(), triangles.begin(), [](const openvdb::Vec3I& v) {
     return std::array<int, 3>{static_cast<int>(v.x()), static_cast<int>(v.y()), static_cast<int>(v.z())};
   });
+  t = {};
   quads.resize(q.size());
   std::transform(q.begin(), q.end(), quads.begin(), [](const openvdb::Vec4I& v) {
     return std::array<int, 4>{static_cast<int>(v.x()), static_cast<int>(v.y()), static_cast<int>(v.z()),

@@ -1,10 +1,15 @@
 // Reading a field blob for the tools (eval, mesh, slice): the bytes and the verified view on them.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <expected>
+#include <optional>
+#include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "palpa/blob/blob.h"
@@ -40,13 +45,55 @@ inline Eigen::Vector3d NodePosition(const blob::FieldView& f, int i, int j, int 
   return {f.origin_m[0] + i * f.voxel_m, f.origin_m[1] + j * f.voxel_m, f.origin_m[2] + k * f.voxel_m};
 }
 
-/// φ at node (i, j, k) in voxels (Q16.16 → double). Indices must be inside the grid.
-inline double PhiVoxels(const blob::FieldView& f, int i, int j, int k) {
-  const std::size_t n =
-      (static_cast<std::size_t>(i) * static_cast<std::size_t>(f.dims[1]) + static_cast<std::size_t>(j)) *
-          static_cast<std::size_t>(f.dims[2]) +
-      static_cast<std::size_t>(k);
-  return static_cast<double>(f.phi[n]) / 65536.0;
+/// φ at node (i, j, k), Q16.16 voxels, read in place from either version as the dense v1 grid
+/// the host tools see (docs/blob-format.md § Tools and v2): v2 values clamped to
+/// ±max(band_inside, band_outside), blob::DenseV1's rule, so free-space bounds read as the band.
+/// Indices must be inside the grid.
+inline std::int32_t PhiQ16(const blob::FieldView& f, int i, int j, int k) {
+  const std::int32_t band = std::max(f.band_voxels, f.band_outside) * 65536;
+  return std::clamp(f.NodeQ16(i, j, k), -band, band);
 }
+
+/// PhiQ16 in voxels (Q16.16 → double).
+inline double PhiVoxels(const blob::FieldView& f, int i, int j, int k) {
+  return static_cast<double>(PhiQ16(f, i, j, k)) / 65536.0;
+}
+
+/// The nodes of the 8³ block (8·bi .. 8·bi + 7, ...) as PhiQ16 reads them, without a dense copy:
+/// returns the one value of every node of the block inside the grid when they all have it (a v2
+/// uniform slot at once; a v1 block after comparing them), else writes them to `q16` (local index
+/// (a·8 + b)·8 + c; nodes past the grid's edge are left as they were) and returns nullopt.
+/// block[a] < ceil(dims[a] / 8).
+inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array<int, 3> block,
+                                            std::span<std::int32_t, blob::kBrickNodes> q16) {
+  constexpr int kB = blob::kBrick;
+  const std::int32_t band = std::max(f.band_voxels, f.band_outside) * 65536;
+  if (f.phi == nullptr) {
+    const std::size_t slot = (static_cast<std::size_t>(block[0]) * static_cast<std::size_t>(f.brick_dims[1]) +
+                              static_cast<std::size_t>(block[1])) *
+                                 static_cast<std::size_t>(f.brick_dims[2]) +
+                             static_cast<std::size_t>(block[2]);
+    const std::uint32_t e = f.brick_index[slot];
+    if ((e & blob::kSlotEmpty) != 0)
+      return std::clamp(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256, -band, band);
+  }
+  const int ni = std::min(kB, f.dims[0] - kB * block[0]);
+  const int nj = std::min(kB, f.dims[1] - kB * block[1]);
+  const int nk = std::min(kB, f.dims[2] - kB * block[2]);
+  bool uniform = true;
+  const std::int32_t first = PhiQ16(f, kB * block[0], kB * block[1], kB * block[2]);
+  for (int a = 0; a < ni; ++a)
+    for (int b = 0; b < nj; ++b)
+      for (int c = 0; c < nk; ++c) {
+        const std::int32_t v = PhiQ16(f, kB * block[0] + a, kB * block[1] + b, kB * block[2] + c);
+        q16[static_cast<std::size_t>((a * kB + b) * kB + c)] = v;
+        uniform = uniform && v == first;
+      }
+  if (uniform && f.phi != nullptr) return first;
+  return std::nullopt;
+}
+
+/// The smallest and largest PhiQ16 over the grid, block by block (BlockQ16).
+std::pair<std::int32_t, std::int32_t> PhiRangeQ16(const blob::FieldView& f);
 
 }  // namespace palpa::mesh

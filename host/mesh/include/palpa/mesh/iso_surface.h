@@ -4,6 +4,8 @@
 
 #include <cstddef>
 #include <expected>
+#include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -21,7 +23,9 @@ namespace palpa::mesh {
 /// (TrilinearGradient), or the mean of the adjacent face normals where the gradient vanishes.
 /// Inside is φ ≤ 0, as in eval's sign rule: the isovalue is half a Q16.16 step (2^-17 voxel), so
 /// nodes holding exactly 0 are inside and a plateau of zeros makes no surface of its own.
-/// Outside the grid the field reads +band (free space), so the mesh is closed.
+/// Outside the grid the field reads +band (free space), so the mesh is closed. Either version is
+/// read in place, node values as PhiQ16 gives them (a v2 blob needs no dense copy: memory follows
+/// the band), with the same mesh as from the blob::DenseV1 grid of the same field.
 /// Errors: the field has no node with φ ≤ 0, or none with φ > 0 ("no zero crossing").
 std::expected<TriangleMesh, Error> ExtractZeroSurface(const blob::FieldView& field);
 
@@ -36,6 +40,11 @@ double TrilinearPhi(const blob::FieldView& field, const Eigen::Vector3d& index_p
 /// Binary little-endian PLY 1.0: float x y z nx ny nz per vertex (nx.. only if the mesh has
 /// normals), `list uchar int vertex_indices` per face.
 std::vector<std::byte> ToPly(const TriangleMesh& mesh);
+
+/// ToPly's bytes handed to `sink` in pieces of about 1 MiB, in order, without the whole file in
+/// memory (palpa mesh writes them to the output as they come). False when the sink returns false
+/// (then no further piece is handed).
+bool WritePly(const TriangleMesh& mesh, const std::function<bool(std::span<const std::byte>)>& sink);
 
 /// Wavefront OBJ text: `v`, `vn` (if normals), `f a//a b//b c//c` (1-based).
 std::string ToObj(const TriangleMesh& mesh);
