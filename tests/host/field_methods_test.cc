@@ -20,6 +20,7 @@
 #include "palpa/field/edt_field.h"
 #include "palpa/field/hermite_field.h"
 #include "palpa/field/point_io.h"
+#include "palpa/field/to_blob.h"
 #include "palpa/field/transform.h"
 #include "palpa/mesh/eval.h"
 #include "palpa/mesh/sample.h"
@@ -39,16 +40,7 @@ struct Blob {
 
 Blob Encode(const BuildResult& built, const Transform& fit) {
   const GridSpec& g = built.field.grid();
-  blob::BlobMeta meta;
-  for (std::size_t a = 0; a < 3; ++a) {
-    meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
-    meta.origin_m[a] = g.origin_m[static_cast<Eigen::Index>(a)];
-    meta.fit_offset_m[a] = fit.offset_m[static_cast<Eigen::Index>(a)];
-  }
-  meta.voxel_m = g.voxel_m;
-  meta.band_voxels = static_cast<std::uint32_t>(g.band_voxels);
-  meta.method = blob::Method::kHermite;
-  meta.fit_scale = fit.scale;
+  const blob::BlobMeta meta = BlobMetaOf(g, FieldMethod::kHermite, {.transform = fit});
   std::vector<std::int32_t> phi(g.NodeCount());
   built.field.WriteQ16(phi);
   const std::vector<std::byte> bytes = blob::Encode(meta, phi);
@@ -212,17 +204,17 @@ TEST(FieldMethods, BrickWiseBlobEqualsTheDensePayloadsBlob) {
   const GridSpec& g = field.grid();
   std::vector<std::int32_t> dense(g.NodeCount());
   field.WriteQ16(dense);
+  // field::ToBlob (palpa build's writer, issue 21) against the dense encoders, v2 and v1.
+  const blob::BlobMeta meta = BlobMetaOf(g, FieldMethod::kHermite, {.transform = c.fit, .point_count = 5210});
+  EXPECT_EQ(meta.method, blob::Method::kHermite);
+  EXPECT_EQ(meta.fit_scale, c.fit.scale);
+  EXPECT_EQ(meta.dims[2], static_cast<std::uint32_t>(g.dims[2]));
   blob::BlobMetaV2 m;
-  for (std::size_t a = 0; a < 3; ++a) m.meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
-  m.meta.voxel_m = g.voxel_m;
-  m.meta.method = blob::Method::kHermite;
+  m.meta = meta;
   m.band_inside = 6;
   m.band_outside = 2;
-  const auto sparse = blob::EncodeV2(m, [&](std::array<std::uint32_t, 3> b, std::span<std::int32_t, 512> q16) {
-    return field.BrickQ16(field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])),
-                          q16);
-  });
-  EXPECT_EQ(sparse, blob::EncodeV2(m, dense));
+  EXPECT_EQ(ToBlob(field, meta, {.version = 2, .band_inside = 6, .band_outside = 2}), blob::EncodeV2(m, dense));
+  EXPECT_EQ(ToBlob(field, meta, {.version = 1}), blob::Encode(meta, dense));
   std::size_t differ = 0;
   for (int i = 0; i < g.dims[0]; ++i)
     for (int j = 0; j < g.dims[1]; ++j)

@@ -14,6 +14,7 @@
 
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
+#include "palpa/field/to_blob.h"
 #include "palpa/field/transform.h"
 #include "palpa/mesh/eval.h"
 #include "palpa/mesh/sample.h"
@@ -50,17 +51,9 @@ const Knot& GetKnot() {
     auto built = field::BuildField(k->device.positions, k->device.normals, options);
     EXPECT_TRUE(built.has_value());
     const field::GridSpec& g = built->field.grid();
-    blob::BlobMeta meta;
-    for (std::size_t a = 0; a < 3; ++a) {
-      meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
-      meta.origin_m[a] = g.origin_m[static_cast<Eigen::Index>(a)];
-      meta.fit_offset_m[a] = transform.offset_m[static_cast<Eigen::Index>(a)];
-    }
-    meta.voxel_m = g.voxel_m;
-    meta.band_voxels = static_cast<std::uint32_t>(g.band_voxels);
-    meta.method = blob::Method::kHermite;
-    meta.point_count = static_cast<std::uint32_t>(k->device.positions.size());
-    meta.fit_scale = transform.scale;
+    const blob::BlobMeta meta = field::BlobMetaOf(
+        g, field::FieldMethod::kHermite,
+        {.transform = transform, .point_count = static_cast<std::uint32_t>(k->device.positions.size())});
     std::vector<std::int32_t> phi(g.NodeCount());
     built->field.WriteQ16(phi);
     k->bytes = blob::Encode(meta, phi);

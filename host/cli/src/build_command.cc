@@ -21,6 +21,7 @@
 #include "palpa/field/normals.h"
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
+#include "palpa/field/to_blob.h"
 
 namespace palpa::cli {
 namespace {
@@ -47,31 +48,6 @@ class ProgressBar {
   bool enabled_;
   int last_ = -1;
 };
-
-// CRC-32C as blob::Crc32c computes it (same polynomial, init and final xor), with the SSE4.2
-// crc32 instruction where the CPU has it: the v1 payload is dense, and the table-driven
-// reference runs at ~0.3 GB/s, the instruction at ~4 GB/s (bench/field).
-#if defined(__x86_64__)
-__attribute__((target("sse4.2"))) std::uint32_t Crc32cSse42(std::span<const std::byte> data, std::uint32_t crc) {
-  std::uint64_t c = ~crc;
-  std::size_t i = 0;
-  for (; i + 8 <= data.size(); i += 8) {
-    std::uint64_t word = 0;
-    std::memcpy(&word, data.data() + i, 8);
-    c = __builtin_ia32_crc32di(c, word);
-  }
-  auto c32 = static_cast<std::uint32_t>(c);
-  for (; i < data.size(); ++i) c32 = __builtin_ia32_crc32qi(c32, static_cast<unsigned char>(data[i]));
-  return ~c32;
-}
-#endif
-
-std::uint32_t Crc32cFast(std::span<const std::byte> data, std::uint32_t crc) {
-#if defined(__x86_64__)
-  if (__builtin_cpu_supports("sse4.2")) return Crc32cSse42(data, crc);
-#endif
-  return blob::Crc32c(data, crc);
-}
 
 // The voxel, in model units, that the build will about have: from the bounding box of the middle
 // 99.8 % of the samples on each axis (outliers are not removed yet), --fit or --scale, and
@@ -286,21 +262,11 @@ int RunBuild(const BuildArgs& args) {
   const field::GridSpec g = built.field.grid();  // a copy: the field is handed to the encoder below
   const std::size_t field_bricks = built.field.AllocatedBricks();
   const std::array<int, 3> brick_dims = built.field.brick_dims();
-  blob::BlobMeta meta;
-  for (std::size_t a = 0; a < 3; ++a) {
-    meta.dims[a] = static_cast<std::uint32_t>(g.dims[a]);
-    meta.origin_m[a] = g.origin_m[static_cast<Eigen::Index>(a)];
-    meta.fit_offset_m[a] = transform.offset_m[static_cast<Eigen::Index>(a)];
-  }
-  meta.voxel_m = g.voxel_m;
-  meta.band_voxels = static_cast<std::uint32_t>(g.band_voxels);
-  meta.method = options.method == field::FieldMethod::kErosion ? blob::Method::kErosion
-                : options.method == field::FieldMethod::kEdt   ? blob::Method::kEdt
-                                                               : blob::Method::kHermite;
-  meta.point_count = static_cast<std::uint32_t>(points->positions.size());
-  meta.fit_scale = transform.scale;
   const auto build_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0);
-  meta.build_time_ns = static_cast<std::uint64_t>(build_ns.count());
+  const blob::BlobMeta meta = field::BlobMetaOf(g, options.method,
+                                                {.transform = transform,
+                                                 .point_count = static_cast<std::uint32_t>(points->positions.size()),
+                                                 .build_time_ns = static_cast<std::uint64_t>(build_ns.count())});
   const std::size_t nodes = g.NodeCount();
   const std::size_t face_nodes_inside = NegativeFaceNodes(
       [&](std::size_t i, std::size_t j, std::size_t k) {
@@ -312,40 +278,12 @@ int RunBuild(const BuildArgs& args) {
                "palpa build: warning: {}: the field touches its grid boundary (φ < 0 on {} face nodes); palpad treats "
                "those faces as walls\n",
                args.points, face_nodes_inside);
-  std::vector<std::byte> v2;
-  std::unique_ptr<std::int32_t[]> blob_words;
-  std::span<const std::byte> bytes;
-  if (args.format == 2) {
-    // Blob v2 straight from the sparse field, a brick at a time (no dense array: issue 21): the
-    // values clamped to the asymmetric band and packed into bricks.
-    blob::BlobMetaV2 m2;
-    m2.meta = meta;
-    m2.band_inside = static_cast<std::uint32_t>(args.band_voxels);
-    m2.band_outside = static_cast<std::uint32_t>(args.band_outside);
-    // The encoder owns the field from here and frees it once every brick is read, before it
-    // assembles the blob: they never coexist whole (issue 21's memory targets).
-    v2 = blob::EncodeV2(m2, [field = std::move(built.field)](std::array<std::uint32_t, 3> b,
-                                                             std::span<std::int32_t, blob::kBrickNodes> q16) {
-      return field.BrickQ16(field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])),
-                            q16);
-    });
-    bytes = v2;
-  } else {
-    // The v1 payload is dense, written once straight from the sparse field into the output
-    // buffer (no dense float grid, no second copy): header words, then phi in Q16.16.
-    constexpr std::size_t kHeaderWords = blob::kHeaderSize / sizeof(std::int32_t);
-    const std::size_t words = kHeaderWords + nodes;
-    blob_words = std::make_unique_for_overwrite<std::int32_t[]>(words);
-    built.field.WriteQ16(std::span<std::int32_t>(blob_words.get() + kHeaderWords, nodes));
-    blob::HeaderV1 header;
-    const std::vector<std::byte> empty = blob::Encode(meta, {});  // header fields as Encode sets them
-    std::memcpy(&header, empty.data(), sizeof header);
-    header.payload_size = nodes * sizeof(std::int32_t);
-    std::memcpy(blob_words.get(), &header, sizeof header);
-    bytes = {reinterpret_cast<const std::byte*>(blob_words.get()), words * sizeof(std::int32_t)};
-    header.crc32c = Crc32cFast(bytes.subspan(blob::kHeaderSize), Crc32cFast(bytes.first(blob::kCrcOffset), 0));
-    std::memcpy(blob_words.get(), &header, sizeof header);
-  }
+  // Straight from the sparse field (issue 21): the writer owns the field from here and, for v2,
+  // frees it once every brick is read, before it assembles the blob.
+  const std::vector<std::byte> bytes = field::ToBlob(std::move(built.field), meta,
+                                                     {.version = args.format,
+                                                      .band_inside = static_cast<std::uint32_t>(args.band_voxels),
+                                                      .band_outside = static_cast<std::uint32_t>(args.band_outside)});
   if (auto w = WriteFileAtomically(args.output, bytes, {args.points}); !w) {
     fmt::print(stderr, "palpa build: {}\n", w.error());
     return kExitIo;

@@ -133,18 +133,6 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
 
 }  // namespace
 
-std::string_view MethodName(FieldMethod method) {
-  switch (method) {
-    case FieldMethod::kErosion:
-      return "erosion";
-    case FieldMethod::kEdt:
-      return "edt";
-    case FieldMethod::kHermite:
-      return "hermite";
-  }
-  return "unknown";
-}
-
 std::expected<BuildResult, Error> BuildField(const std::vector<Eigen::Vector3d>& device_positions,
                                              const std::vector<Eigen::Vector3d>& normals, const BuildOptions& options,
                                              std::function<void(double fraction)> progress) {

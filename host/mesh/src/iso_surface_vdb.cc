@@ -24,7 +24,7 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
   // voxel per node). As copyFromDense(tolerance 0) of the dense grid made it, but for the blocks no
   // crossing edge touches: every node inside the grid whose value is not the background (+band)
   // is an active voxel; a whole block inside the grid with one value below the background, or
-  // with every value below -2 voxels, is an inactive tile; a block above +2 voxels is left to the
+  // with every value below -1.25 voxels, is an inactive tile; a block above +1.25 is left to the
   // background; outside the grid, the background. The mesh is byte for byte the dense grid's
   // (kitten and oni, v1 and v2, 300 and 1,200 cells).
   const auto background = static_cast<float>(std::max(field.band_voxels, field.band_outside));
@@ -32,7 +32,7 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
   grid->setGridClass(openvdb::GRID_LEVEL_SET);
   {
     constexpr int kB = palpa::blob::kBrick;
-    constexpr std::int32_t kNoCrossing = 2 * 65536;  // Q16.16 voxels
+    constexpr std::int32_t kNoCrossing = 65536 + 65536 / 4;  // 1.25 voxels, Q16.16
     auto acc = grid->getAccessor();
     std::array<std::int32_t, palpa::blob::kBrickNodes> q16{};
     const auto to_float = [](std::int32_t q) { return static_cast<float>(q) / 65536.0f; };
@@ -50,9 +50,11 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
           }
           if (!one) {
             // No edge of a block whose nodes are all farther than kNoCrossing from 0 on one side
-            // crosses the surface (neighbour differences are at most a voxel), and volumeToMesh
-            // reads only the values at crossing edges' ends: such a block needs no leaf (half the
-            // leaves of the kitten's band, and with them half of volumeToMesh's work space).
+            // crosses the surface: palpa's fields keep axis neighbours within 1 voxel (the
+            // proxy needs it; FieldShape tests), 1 + 2/256 after v2's Q7.8. volumeToMesh reads
+            // only the values at crossing edges' ends, so such a block needs no leaf (half the
+            // leaves of the kitten's band, and with them half of volumeToMesh's work space). A
+            // blob from elsewhere with steeper neighbours may mesh differently beside one.
             bool far_in = true, far_out = true;
             for (int a = 0; a < ni; ++a)
               for (int b = 0; b < nj; ++b)

@@ -145,27 +145,35 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
 }
 
 std::expected<void, Error> CheckClosedOriented(const TriangleMesh& mesh, const std::string& name) {
-  // Sorted directed edges (key, face): each must be unique and have its reverse.
-  std::vector<std::pair<std::uint64_t, std::size_t>> edges;
+  // Sorted directed edges: each must be unique and have its reverse. Keys alone (8 bytes an edge:
+  // palpa mesh checks 21 M edges at 1,200 cells); the faces are found again for a message.
+  std::vector<std::uint64_t> edges;
   edges.reserve(3 * mesh.faces.size());
-  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
-    for (std::size_t a = 0; a < 3; ++a) edges.emplace_back(EdgeKey(mesh.faces[f][a], mesh.faces[f][(a + 1) % 3]), f);
+  for (const auto& f : mesh.faces)
+    for (std::size_t a = 0; a < 3; ++a) edges.push_back(EdgeKey(f[a], f[(a + 1) % 3]));
   std::sort(edges.begin(), edges.end());
-  auto where = [&](std::size_t f) {
+  auto where = [&](std::uint64_t key, std::size_t skip) {
+    std::size_t f = 0;
+    for (std::size_t seen = 0; f < mesh.faces.size(); ++f) {
+      bool has = false;
+      for (std::size_t a = 0; a < 3; ++a) has = has || EdgeKey(mesh.faces[f][a], mesh.faces[f][(a + 1) % 3]) == key;
+      if (has && seen++ == skip) break;
+    }
     return f < mesh.face_lines.size() ? fmt::format("{}:{}: face {}", name, mesh.face_lines[f], f)
                                       : fmt::format("{}: face {}", name, f);
   };
   for (std::size_t e = 0; e < edges.size(); ++e) {
-    const auto a = static_cast<int>(edges[e].first >> 32);
-    const auto b = static_cast<int>(edges[e].first & 0xffffffffu);
-    if (e + 1 < edges.size() && edges[e + 1].first == edges[e].first)
-      return std::unexpected(Error{
-          fmt::format("{}: edge {}->{} is also used by face {}: the mesh is non-manifold or inconsistently oriented",
-                      where(edges[e].second), a, b, edges[e + 1].second)});
-    const auto reverse = std::lower_bound(edges.begin(), edges.end(), std::make_pair(EdgeKey(b, a), std::size_t{0}));
-    if (reverse == edges.end() || reverse->first != EdgeKey(b, a))
-      return std::unexpected(Error{
-          fmt::format("{}: edge {}-{} has no opposite face: the mesh must be closed", where(edges[e].second), a, b)});
+    const auto a = static_cast<int>(edges[e] >> 32);
+    const auto b = static_cast<int>(edges[e] & 0xffffffffu);
+    if (e + 1 < edges.size() && edges[e + 1] == edges[e]) {
+      const std::string second = where(edges[e], 1);
+      return std::unexpected(
+          Error{fmt::format("{}: edge {}->{} is also used by face {}: the mesh is non-manifold or inconsistently oriented",
+                            where(edges[e], 0), a, b, second.substr(second.rfind(' ') + 1))});
+    }
+    if (!std::binary_search(edges.begin(), edges.end(), EdgeKey(b, a)))
+      return std::unexpected(
+          Error{fmt::format("{}: edge {}-{} has no opposite face: the mesh must be closed", where(edges[e], 0), a, b)});
   }
   return {};
 }

@@ -88,12 +88,37 @@ std::expected<Header, BlobError> ReadHeader(std::span<const std::byte> blob, std
   return h;
 }
 
-}  // namespace
-
-std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc) {
+std::uint32_t Crc32cTable(std::span<const std::byte> data, std::uint32_t crc) {
   crc = ~crc;
   for (std::byte b : data) crc = kCrcTable[(crc ^ static_cast<std::uint32_t>(b)) & 0xFFU] ^ (crc >> 8);
   return ~crc;
+}
+
+// The SSE4.2 crc32 instruction computes the same CRC-32C (same polynomial; the init and final
+// xor are ours): ~4 GB/s where the table runs at ~0.3 GB/s, which a dense v1 payload or the
+// verification of a large blob feels.
+#if defined(__x86_64__)
+__attribute__((target("sse4.2"))) std::uint32_t Crc32cSse42(std::span<const std::byte> data, std::uint32_t crc) {
+  std::uint64_t c = ~crc;
+  std::size_t i = 0;
+  for (; i + 8 <= data.size(); i += 8) {
+    std::uint64_t word = 0;
+    std::memcpy(&word, data.data() + i, 8);
+    c = __builtin_ia32_crc32di(c, word);
+  }
+  auto c32 = static_cast<std::uint32_t>(c);
+  for (; i < data.size(); ++i) c32 = __builtin_ia32_crc32qi(c32, static_cast<unsigned char>(data[i]));
+  return ~c32;
+}
+#endif
+
+}  // namespace
+
+std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc) {
+#if defined(__x86_64__)
+  if (__builtin_cpu_supports("sse4.2")) return Crc32cSse42(data, crc);
+#endif
+  return Crc32cTable(data, crc);
 }
 
 std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {

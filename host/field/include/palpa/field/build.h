@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include "palpa/blob/blob.h"
 #include "palpa/field/error.h"
 #include "palpa/field/grid.h"
 #include "palpa/field/hermite_field.h"
@@ -24,10 +25,10 @@
 
 namespace palpa::field {
 
-enum class FieldMethod { kErosion, kEdt, kHermite };
-
-// "erosion", "edt", "hermite".
-std::string_view MethodName(FieldMethod method);
+// One method enum from build to blob (issue 21): the blob's header stores it as built.
+using FieldMethod = blob::Method;
+// "erosion", "edt", "hermite" (blob::MethodName).
+using blob::MethodName;
 
 struct BuildOptions {
   GridOptions grid;
