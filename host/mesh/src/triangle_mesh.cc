@@ -167,9 +167,9 @@ std::expected<void, Error> CheckClosedOriented(const TriangleMesh& mesh, const s
     const auto b = static_cast<int>(edges[e] & 0xffffffffu);
     if (e + 1 < edges.size() && edges[e + 1] == edges[e]) {
       const std::string second = where(edges[e], 1);
-      return std::unexpected(
-          Error{fmt::format("{}: edge {}->{} is also used by face {}: the mesh is non-manifold or inconsistently oriented",
-                            where(edges[e], 0), a, b, second.substr(second.rfind(' ') + 1))});
+      return std::unexpected(Error{
+          fmt::format("{}: edge {}->{} is also used by face {}: the mesh is non-manifold or inconsistently oriented",
+                      where(edges[e], 0), a, b, second.substr(second.rfind(' ') + 1))});
     }
     if (!std::binary_search(edges.begin(), edges.end(), EdgeKey(b, a)))
       return std::unexpected(
