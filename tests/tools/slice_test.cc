@@ -5,8 +5,10 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "field_fixtures.h"
+#include "palpa/blob/blob.h"
 #include "palpa/mesh/slice.h"
 #include "tools_test_util.h"
 
@@ -105,6 +107,35 @@ TEST_F(SliceCli, PngRoundTripsAndBadPlanesExitTwo) {
   const Outcome axis = Palpa("slice " + field + " --axis w --at 0 -o " + Path("bad.png"));
   EXPECT_EQ(axis.code, 2) << axis.out;
   EXPECT_FALSE(fs::exists(Path("bad.png")));
+}
+
+// Issue 21: palpa slice and palpa view read a v2 blob in place. The picture is the one of the
+// blob::DenseV1 grid, pixel for pixel, also when the band outside is the wider one (the colour
+// scale is the dense equivalent's ±max(band_inside, band_outside)).
+class InPlaceSlice : public TempDirTest {};
+
+TEST_F(InPlaceSlice, V2SliceIsTheDenseGridsSlicePixelForPixel) {
+  const std::string field = Path("k.palpa");
+  const Outcome b =
+      Palpa("build " + DataFile("kitten.xyz").string() + " -o " + field + " --cells 90 --band 2 --band-outside 5 -q");
+  ASSERT_EQ(b.code, 0) << b.out;
+  auto stored = blob::ReadFile(field.c_str(), blob::Load::kAsStored);
+  ASSERT_TRUE(stored.has_value());
+  const auto v2 = blob::Verify(*stored);
+  ASSERT_TRUE(v2.has_value()) << v2.error().what();
+  const std::vector<std::byte> dense_bytes = blob::DenseV1(*v2);
+  const auto v1 = blob::Verify(dense_bytes);
+  ASSERT_TRUE(v1.has_value()) << v1.error().what();
+  ASSERT_EQ(v1->band_voxels, 5);
+  for (int axis = 0; axis < 3; ++axis) {
+    const double at = v2->origin_m[static_cast<std::size_t>(axis)] +
+                      0.5 * (v2->dims[static_cast<std::size_t>(axis)] - 1) * v2->voxel_m;
+    auto in_place = mesh::RenderSlice(*v2, axis, at, 2);
+    auto dense = mesh::RenderSlice(*v1, axis, at, 2);
+    ASSERT_TRUE(in_place && dense);
+    EXPECT_EQ(in_place->rgb, dense->rgb) << axis;
+    EXPECT_EQ(mesh::EncodePng(*in_place), mesh::EncodePng(*dense)) << axis;
+  }
 }
 
 }  // namespace

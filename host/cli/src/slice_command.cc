@@ -10,7 +10,7 @@ namespace palpa::cli {
 
 int RunSlice(const SliceArgs& args) {
   if (const int refused = CheckOutput("slice", args.output, {args.field}); refused != kExitOk) return refused;
-  auto field = mesh::LoadField(args.field);
+  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 read in place
   if (!field) {
     fmt::print(stderr, "palpa slice: {}\n", field.error().message);
     return kExitBadInput;

@@ -53,7 +53,7 @@ int RunView(const ViewArgs& args) {
   }
   view::ViewContent content;
   content.field_path = args.field;
-  auto field = mesh::LoadField(args.field);
+  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 read in place
   if (!field) {
     fmt::print(stderr, "palpa view: {}\n", field.error().message);
     return kExitBadInput;

@@ -127,11 +127,12 @@ std::expected<SliceImage, Error> RenderSlice(const blob::FieldView& field, int a
   img.pixels_per_voxel = s;
 
   // Layout: title, then [v labels | panel | gap | bar | ticks + labels], then the u labels.
-  const double band = field.band_voxels;
+  // The dense equivalent's band (a v2 blob read in place: the wider of its two; v1: its own).
+  const int band_nodes = std::max(field.band_voxels, field.band_outside);
+  const double band = band_nodes;
   const int tick_every = std::max(1, static_cast<int>(std::ceil(2 * band / 12)));
   int label_w = TextWidth("phi (mm)");
-  for (int l = -field.band_voxels; l <= field.band_voxels; ++l)
-    label_w = std::max(label_w, TextWidth(Mm(l * field.voxel_m)));
+  for (int l = -band_nodes; l <= band_nodes; ++l) label_w = std::max(label_w, TextWidth(Mm(l * field.voxel_m)));
   const double u_lo = field.origin_m[static_cast<std::size_t>(img.u_axis)];
   const double v_lo = field.origin_m[static_cast<std::size_t>(img.v_axis)];
   const double u_hi = u_lo + (nu - 1) * field.voxel_m;
@@ -140,7 +141,7 @@ std::expected<SliceImage, Error> RenderSlice(const blob::FieldView& field, int a
       std::max({TextWidth(Mm(v_lo)), TextWidth(Mm(v_hi)),
                 TextWidth(std::string(1, kAxisName[static_cast<std::size_t>(img.v_axis)]) + " (mm)")});
   const std::string title = fmt::format("{} = {} mm   voxel {:.3f} mm   band {} voxels", kAxisName[a], Mm(at_m),
-                                        field.voxel_m * 1e3, field.band_voxels);
+                                        field.voxel_m * 1e3, band_nodes);
   const int title_h = kTextHeight + 12;   // the title line
   const int header_h = kTextHeight + 10;  // axis name over the v labels, "phi (mm)" over the bar
   img.panel = {kMargin + v_label_w + 8, kMargin + title_h + header_h, nu * s, nv * s};
@@ -192,7 +193,7 @@ std::expected<SliceImage, Error> RenderSlice(const blob::FieldView& field, int a
   canvas.Fill(b.x - 1, b.y + b.h, b.x + b.w + 1, b.y + b.h + 1, {0, 0, 0});
   canvas.Fill(b.x - 1, b.y, b.x, b.y + b.h, {0, 0, 0});
   canvas.Fill(b.x + b.w, b.y, b.x + b.w + 1, b.y + b.h, {0, 0, 0});
-  for (int l = -field.band_voxels; l <= field.band_voxels; ++l) {
+  for (int l = -band_nodes; l <= band_nodes; ++l) {
     if (l % tick_every != 0) continue;
     const int y = b.y + static_cast<int>(std::lround((band - l) / (2 * band) * b.h));
     canvas.Fill(b.x + b.w, y, b.x + b.w + 6, y + 1, {0, 0, 0});

@@ -120,7 +120,7 @@ std::string InfoJson(const ViewContent& c) {
   j["dims"] = f.dims;
   j["origin_m"] = f.origin_m;
   j["voxel_m"] = f.voxel_m;
-  j["band_voxels"] = f.band_voxels;
+  j["band_voxels"] = std::max(f.band_voxels, f.band_outside);  // the dense equivalent's (docs/blob-format.md)
   j["method"] = MethodName(f.method);
   j["point_count"] = f.point_count;
   // The file's, as palpad reports them for the field it renders (not the dense copy's of a v2 blob).
