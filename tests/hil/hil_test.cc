@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "grid_faces.h"
+#include "palpa/record/run_record.h"
 #include "palpa/trace/trace.h"
 #include "process.h"
 #include "recorder.h"
@@ -141,7 +142,7 @@ TEST(Hil, RealHandInvariantsCanFail) {
   // One row a millisecond: HIP and proxy on the z axis, force along z.
   const auto write = [&](const std::string& name, const std::vector<Row>& rows) {
     std::ofstream out(dir + "/" + name + ".csv");
-    out << "t_s,hip_x_m,hip_y_m,hip_z_m,proxy_x_m,proxy_y_m,proxy_z_m,force_x_n,force_y_n,force_z_n,contact\n";
+    out << palpa::record::kCsvHeader << "\n";
     for (std::size_t i = 0; i < rows.size(); ++i)
       out << static_cast<double>(i) * 0.001 << ",0,0," << rows[i].hz << ",0,0," << rows[i].pz << ",0,0," << rows[i].fz
           << "," << (rows[i].fz != 0 ? 1 : 0) << "\n";

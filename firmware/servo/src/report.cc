@@ -42,16 +42,6 @@ std::string DirectoryOf(const std::string& path) {
 
 }  // namespace
 
-bool WriteCsvHeader(std::FILE* out) {
-  return std::fprintf(out, "%.*s\n", static_cast<int>(kCsvHeader.size()), kCsvHeader.data()) >= 0;
-}
-
-bool WriteCsvRow(std::FILE* out, const LogRow& r) {
-  return std::fprintf(out, "%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.12g,%.9g,%.9g,%.9g,%d\n", r.t_s, r.hip_m[0],
-                      r.hip_m[1], r.hip_m[2], r.proxy_m[0], r.proxy_m[1], r.proxy_m[2], r.force_n[0], r.force_n[1],
-                      r.force_n[2], r.contact ? 1 : 0) >= 0;
-}
-
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows) {
   if (!WriteCsvHeader(out)) return false;
   for (const LogRow& r : rows)

@@ -40,6 +40,7 @@
 #include "commands.h"
 #include "field_sampler.h"
 #include "palpa/blob/blob.h"
+#include "palpa/record/run_record.h"
 #include "palpa/trace/trace.h"
 
 extern char** environ;
@@ -51,12 +52,11 @@ namespace fs = std::filesystem;
 
 constexpr int kExitFailed = 1;              // a replay did not match or broke an invariant
 constexpr double kForceScale = 16777216.0;  // goldens store forces in units of 2^-24 N
-// palpa/servo/servo_loop.h TelemetryFlag: clamped 1, e-stop 2, ramp 4, overrun 8, GPIO error 16.
-constexpr std::uint32_t kTelemetryFlagEstop = 1u << 1;
-// swap 32, swap ramp 64 (issue 7).
-constexpr std::uint32_t kTelemetryFlagSwap = 1u << 5;
-constexpr std::uint32_t kTelemetryFlagRamp = 1u << 2;
-constexpr std::uint32_t kGoldenFlags = 1u | 2u | 4u | 16u | 32u | 64u;  // all but overrun (wall-clock, paced only)
+// The run record's telemetry flags (palpa/record/run_record.h), as palpad's timing record has them.
+constexpr std::uint32_t kTelemetryFlagEstop = record::kFlagEstop;
+constexpr std::uint32_t kTelemetryFlagSwap = record::kFlagSwap;
+constexpr std::uint32_t kTelemetryFlagRamp = record::kFlagRamp;
+constexpr std::uint32_t kGoldenFlags = record::kDeterministicFlags;  // all but overrun (wall-clock)
 
 // ---------------------------------------------------------------- small helpers
 
@@ -303,6 +303,8 @@ std::expected<std::vector<Tick>, std::string> ParseOutput(const std::string& csv
   std::vector<Tick> ticks;
   std::size_t pos = csv.find('\n');
   if (pos == std::string::npos) return ticks;
+  if (std::string_view(csv.data(), pos) != record::kCsvHeader)
+    return std::unexpected(fmt::format("{}:1: expected palpad's CSV header '{}'", name, record::kCsvHeader));
   ++pos;
   std::size_t line_no = 1;
   while (pos < csv.size()) {
@@ -312,23 +314,17 @@ std::expected<std::vector<Tick>, std::string> ParseOutput(const std::string& csv
     pos = end + 1;
     ++line_no;
     if (line.empty()) continue;
-    double v[11];
-    const char* p = line.data();
-    for (int i = 0; i < 11; ++i) {
-      char* next = nullptr;
-      v[i] = std::strtod(p, &next);
-      if (next == p) return std::unexpected(fmt::format("{}:{}: not a palpad output row", name, line_no));
-      p = next + (i < 10 ? 1 : 0);
-    }
+    auto row = record::ParseCsvRow(line);
+    if (!row) return std::unexpected(fmt::format("{}:{}: {}", name, line_no, row.error()));
     Tick t;
-    t.t_s = v[0];
+    t.t_s = row->t_s;
     for (std::size_t k = 0; k < 3; ++k) {
-      t.hip[k] = v[1 + k];
-      t.proxy[k] = v[4 + k];
-      t.force[k] = v[7 + k];
-      t.force_q24[k] = static_cast<std::int32_t>(std::llround(v[7 + k] * kForceScale));
+      t.hip[k] = row->hip_m[k];
+      t.proxy[k] = row->proxy_m[k];
+      t.force[k] = row->force_n[k];
+      t.force_q24[k] = static_cast<std::int32_t>(std::llround(row->force_n[k] * kForceScale));
     }
-    t.contact = v[10] != 0;
+    t.contact = row->contact;
     t.row_hash = RowHash(line);
     ticks.push_back(t);
   }

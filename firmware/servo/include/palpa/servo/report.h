@@ -14,17 +14,14 @@
 
 namespace palpa::servo {
 
-/// Output CSV column line (v1). Columns: tick time s, HIP m, proxy m, force N, contact 0/1.
-inline constexpr std::string_view kCsvHeader =
-    "t_s,hip_x_m,hip_y_m,hip_z_m,proxy_x_m,proxy_y_m,proxy_z_m,fx_n,fy_n,fz_n,contact";
+/// Output CSV column line, header and row writers: the run record's (palpa/record/run_record.h).
+using record::kCsvHeader;
+using record::WriteCsvHeader;
+using record::WriteCsvRow;
 
-/// Writes the header and `rows` to `out`: times and metres with %.12g, newtons with %.9g (both
-/// more digits than a Q16.16 LSB needs), contact 0/1. Same rows → same bytes. False on an I/O error.
+/// Writes the header and `rows` to `out` (record::WriteCsvHeader, record::WriteCsvRow). Same rows
+/// → same bytes. False on an I/O error.
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows);
-/// The header line alone (what WriteCsv writes first).
-bool WriteCsvHeader(std::FILE* out);
-/// One row, formatted as WriteCsv does (the telemetry drain writes rows as they arrive).
-bool WriteCsvRow(std::FILE* out, const LogRow& row);
 
 /// A file written under a temporary name in the target's directory and renamed over the target
 /// only by Commit(), after fsync: readers see the old file or the complete new one, never a part.

@@ -50,6 +50,7 @@
 #include "palpa/device/haptic_device.h"
 #include "palpa/gpio/gpio.h"
 #include "palpa/proxy/proxy.h"
+#include "palpa/record/run_record.h"
 #include "palpa/rt/clock.h"
 #include "palpa/rt/histogram.h"
 #include "palpa/rt/spsc_ring.h"
@@ -60,26 +61,18 @@ namespace palpa::servo {
 // Set from signal handlers and read by the loop: must be a plain lock-free atomic.
 static_assert(std::atomic<bool>::is_always_lock_free);
 
-/// One tick as the output CSV row. Device frame.
-struct LogRow {
-  double t_s = 0;                   ///< device time of the HIP sample, s
-  std::array<double, 3> hip_m{};    ///< HIP as read, m
-  std::array<double, 3> proxy_m{};  ///< proxy after the tick, m (the Q16.16 grid position converted)
-  std::array<double, 3> force_n{};  ///< force written, N (the Q16.16 force converted exactly, times the ramp)
-  bool contact = false;             ///< proxy held apart from the HIP by the surface
-};
-static_assert(std::is_trivially_copyable_v<LogRow>);
+/// One tick as the output CSV row (palpa/record/run_record.h: the run record's one definition).
+using record::LogRow;
 
-/// TelemetrySample::flags bits.
-enum TelemetryFlag : std::uint32_t {
-  kFlagClamped = 1u << 0,    ///< |f| hit max_force
-  kFlagEstop = 1u << 1,      ///< e-stop asserted: zero force, proxy not run
-  kFlagRamp = 1u << 2,       ///< force scaled down while ramping in after an e-stop
-  kFlagOverrun = 1u << 3,    ///< the tick ended after the next deadline
-  kFlagGpioError = 1u << 4,  ///< a GPIO access failed this tick
-  kFlagSwap = 1u << 5,       ///< this tick took a new field (OfferField) at its start
-  kFlagSwapRamp = 1u << 6,   ///< force scaled down while ramping in after a field swap
-};
+/// TelemetrySample::flags bits (palpa/record/run_record.h).
+using record::kFlagClamped;
+using record::kFlagEstop;
+using record::kFlagGpioError;
+using record::kFlagOverrun;
+using record::kFlagRamp;
+using record::kFlagSwap;
+using record::kFlagSwapRamp;
+using record::TelemetryFlag;
 
 /// What one tick sends through the ring.
 struct TelemetrySample {
