@@ -268,6 +268,38 @@ void ExpectReportedOpen(const Outcome& build) {
 }
 
 // Issue 20: an open scan is reported open (with the area the field closed), a closed one is not.
+// Issue 21: trace synth samples a v2 blob in place. Its traces are those of the blob::DenseV1
+// file of the same field, byte for byte, for a stroke and a poke grid.
+TEST_F(Cli, TraceSynthSamplesV2InPlaceAsItsDenseEquivalent) {
+  const std::string v2 = Path("s.palpa");
+  ASSERT_EQ(Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + v2 + " --cells 80 -q").code, 0);
+  auto stored = palpa::blob::ReadFile(v2.c_str(), palpa::blob::Load::kAsStored);
+  ASSERT_TRUE(stored.has_value());
+  const auto view = palpa::blob::Verify(*stored);
+  ASSERT_TRUE(view.has_value()) << view.error().what();
+  ASSERT_EQ(view->version, palpa::blob::kVersion2);
+  const std::vector<std::byte> dense = palpa::blob::DenseV1(*view);
+  const std::string v1 = Path("dense.palpa");
+  std::ofstream(v1, std::ios::binary)
+      .write(reinterpret_cast<const char*>(dense.data()), static_cast<std::streamsize>(dense.size()));
+  // The traces without their "# field NAME" comment line (the files' names differ).
+  const auto read = [](const std::string& path) {
+    std::ifstream in(path);
+    std::string text;
+    for (std::string line; std::getline(in, line);)
+      if (line.rfind("# field ", 0) != 0) text += line + "\n";
+    return text;
+  };
+  for (const char* kind : {"stroke", "poke"}) {
+    const std::string a = Path(std::string(kind) + "-v2.csv"), b = Path(std::string(kind) + "-v1.csv");
+    ASSERT_EQ(Palpa("trace synth --field " + v2 + " --kind " + kind + " -o " + a).code, 0) << kind;
+    ASSERT_EQ(Palpa("trace synth --field " + v1 + " --kind " + kind + " -o " + b).code, 0) << kind;
+    const std::string ta = read(a), tb = read(b);
+    EXPECT_GT(ta.size(), 1000u) << kind;
+    EXPECT_TRUE(ta == tb) << kind;
+  }
+}
+
 TEST_F(Cli, OpenScanIsReportedOpen) {
   std::ifstream in(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
   std::string cap;

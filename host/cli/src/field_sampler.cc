@@ -1,5 +1,7 @@
 #include "field_sampler.h"
 
+#include "palpa/mesh/field_file.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -11,17 +13,17 @@ double FieldSampler::Phi(const Eigen::Vector3d& x_m) const {
   for (int a = 0; a < 3; ++a) {
     g[a] = (x_m[a] - f_.origin_m[static_cast<std::size_t>(a)]) / f_.voxel_m;
     const double last = f_.dims[static_cast<std::size_t>(a)] - 1;
-    if (!(g[a] == g[a])) return f_.band_voxels * f_.voxel_m;  // NaN: free space
+    if (!(g[a] == g[a])) return std::max(f_.band_voxels, f_.band_outside) * f_.voxel_m;  // NaN: free space
     g[a] = std::clamp(g[a], 0.0, last);  // outside: the boundary value extended outward, as the sampler
     c[a] = std::min(static_cast<std::ptrdiff_t>(g[a]), static_cast<std::ptrdiff_t>(last) - 1);
     g[a] -= static_cast<double>(c[a]);
   }
-  const std::ptrdiff_t ny = f_.dims[1], nz = f_.dims[2];
   double out = 0;
   for (int n = 0; n < 8; ++n) {
-    const std::ptrdiff_t i = c[0] + ((n >> 2) & 1), j = c[1] + ((n >> 1) & 1), k = c[2] + (n & 1);
+    const auto i = static_cast<int>(c[0] + ((n >> 2) & 1)), j = static_cast<int>(c[1] + ((n >> 1) & 1)),
+               k = static_cast<int>(c[2] + (n & 1));
     const double w = ((n & 4) ? g[0] : 1 - g[0]) * ((n & 2) ? g[1] : 1 - g[1]) * ((n & 1) ? g[2] : 1 - g[2]);
-    out += w * f_.phi[(i * ny + j) * nz + k];
+    out += w * mesh::PhiQ16(f_, i, j, k);  // v1 or v2, read in place as the dense equivalent
   }
   return out / 65536.0 * f_.voxel_m;
 }

@@ -1,5 +1,6 @@
 // Float64 trilinear sampling of a verified blob on the host, in device metres: for trace
-// synthesis and reports (never in the servo loop, which uses palpa/sampler/trilinear.h).
+// synthesis and reports (never in the servo loop, which uses palpa/sampler/trilinear.h). Either
+// version, read in place with the dense equivalent's values (mesh::PhiQ16).
 #pragma once
 
 #include <Eigen/Core>

@@ -1047,7 +1047,7 @@ int RunCases(Context& cx, const std::string& action) {
     const auto load = [&](const std::string& name, const fs::path& path) -> const LoadedField* {
       auto& loaded = loaded_fields[name];
       if (loaded) return loaded.get();
-      auto blob_bytes = blob::ReadFile(path.c_str());
+      auto blob_bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // v2 sampled in place
       if (!blob_bytes) {
         fmt::print(stderr, "palpa hil: {}\n", blob_bytes.error().what());
         return nullptr;

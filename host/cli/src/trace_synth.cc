@@ -570,7 +570,7 @@ class Synth {
 
 int RunTraceSynth(const TraceSynthArgs& a) {
   if (const int refused = CheckOutput("trace synth", a.output, {a.field}); refused != kExitOk) return refused;
-  auto bytes = blob::ReadFile(a.field.c_str());
+  auto bytes = blob::ReadFile(a.field.c_str(), blob::Load::kAsStored);  // v2 sampled in place
   if (!bytes) {
     fmt::print(stderr, "palpa trace synth: {}\n", bytes.error().what());
     return kExitBadInput;
