@@ -8,6 +8,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 namespace {
@@ -103,6 +104,22 @@ TEST(ReadBounded, RefusesNonRegularFilesAtOnceAndFilesOverTheCap) {
   ASSERT_TRUE(fits);
   EXPECT_EQ(fits->size(), 2049U);
   fs::remove_all(dir);
+}
+
+// A file longer than its size at open (here procfs, which reports 0 bytes: the path a file that
+// grows after the open takes) is read past that size, whole, through the end probe; past the
+// cap it is refused as "more than" the cap.
+TEST(ReadBounded, ReadsPastTheSizeAtOpenUpToTheCap) {
+  std::ifstream in("/proc/self/cmdline", std::ios::binary);
+  const std::string expected((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(expected.size(), 10U);
+  const auto whole = ReadBounded("/proc/self/cmdline", 1 << 20, "command line");
+  ASSERT_TRUE(whole) << whole.error().message;
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(whole->data()), whole->size()), expected);
+  const auto capped = ReadBounded("/proc/self/cmdline", expected.size() - 1, "command line");
+  ASSERT_FALSE(capped);
+  // ("holds more than": under qemu-user the guest's /proc/self/cmdline is a copy of known size.)
+  EXPECT_NE(capped.error().message.find("; at most"), std::string::npos) << capped.error().message;
 }
 
 TEST(LineReader, ReturnsLinesAndRefusesALineOverTheCap) {

@@ -52,11 +52,6 @@ namespace fs = std::filesystem;
 
 constexpr int kExitFailed = 1;              // a replay did not match or broke an invariant
 constexpr double kForceScale = 16777216.0;  // goldens store forces in units of 2^-24 N
-// The run record's telemetry flags (palpa/record/run_record.h), as palpad's timing record has them.
-constexpr std::uint32_t kTelemetryFlagEstop = record::kFlagEstop;
-constexpr std::uint32_t kTelemetryFlagSwap = record::kFlagSwap;
-constexpr std::uint32_t kTelemetryFlagRamp = record::kFlagRamp;
-constexpr std::uint32_t kGoldenFlags = record::kDeterministicFlags;  // all but overrun (wall-clock)
 
 // ---------------------------------------------------------------- small helpers
 
@@ -290,7 +285,7 @@ struct Tick {
   bool contact = false;
   std::array<std::int32_t, 3> force_q24{};  // force in 2^-24 N
   std::uint16_t row_hash = 0;               // FNV-1a of the row text, folded
-  std::uint8_t flags = 0;                   // telemetry flags that are deterministic (kGoldenFlags)
+  std::uint8_t flags = 0;                   // telemetry flags that are deterministic (record::kDeterministicFlags)
 };
 
 std::uint16_t RowHash(std::string_view line) {
@@ -516,11 +511,11 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
     m.max_force_n = std::max(m.max_force_n, f.norm());
     const bool swapped = swap_field != nullptr && c.swap_at >= 0 && i >= static_cast<std::size_t>(c.swap_at);
     const FieldSampler& field_at = swapped ? *swap_field : first_field;
-    if ((t.flags & kTelemetryFlagEstop) != 0) seated = false;
+    if ((t.flags & record::kFlagEstop) != 0) seated = false;
     // A swap whose HIP is beyond the new field's band restarts the proxy at the HIP (docs/upload.md).
-    if ((t.flags & kTelemetryFlagSwap) != 0 && t.proxy == t.hip) seated = false;
+    if ((t.flags & record::kFlagSwap) != 0 && t.proxy == t.hip) seated = false;
     if (!seated)
-      seated = (t.flags & kTelemetryFlagEstop) == 0 && field_at.Phi(Eigen::Vector3d(t.hip[0], t.hip[1], t.hip[2])) >= 0;
+      seated = (t.flags & record::kFlagEstop) == 0 && field_at.Phi(Eigen::Vector3d(t.hip[0], t.hip[1], t.hip[2])) >= 0;
     const double phi_voxels = seated ? field_at.Phi(proxy) / field_at.voxel_m() : m.min_proxy_phi_voxels;
     if (phi_voxels < m.min_proxy_phi_voxels) {
       m.min_proxy_phi_voxels = phi_voxels;
@@ -531,7 +526,7 @@ Metrics Measure(const std::vector<Tick>& ticks, const Case& c, const FieldSample
     const Eigen::Vector3d hip(t.hip[0], t.hip[1], t.hip[2]);
     const double phi_h = field_at.Phi(hip) / vox;
     const double fn = f.norm();
-    const bool exempt = (t.flags & (kTelemetryFlagEstop | kTelemetryFlagRamp)) != 0;
+    const bool exempt = (t.flags & (record::kFlagEstop | record::kFlagRamp)) != 0;
     if (fn > 0 && phi_h < 0) m.deepest_hip_mm = std::max(m.deepest_hip_mm, 1e3 * (hip - proxy).norm());
     // Held: a force with the HIP outside. Allowed only while the straight way from the proxy runs
     // into the object: deeper than where the proxy rests (or the surface) by more than δ/4 (δ =
@@ -1074,7 +1069,7 @@ int RunCases(Context& cx, const std::string& action) {
     // Timing and telemetry flags from palpad --record-timing (both modes).
     const auto timing = ReadTiming(replay->dir / "timing.csv");
     for (std::size_t i = 0; i < timing.size() && i < replay->ticks.size(); ++i)
-      replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & kGoldenFlags);
+      replay->ticks[i].flags = static_cast<std::uint8_t>(timing[i].flags & record::kDeterministicFlags);
     Metrics m = Measure(replay->ticks, c, sampler, swap_sampler ? &*swap_sampler : nullptr, cx.k, cx.max_force,
                         cx.suite.limits);
     if (replay->exit_code != c.expect_exit)
@@ -1087,7 +1082,7 @@ int RunCases(Context& cx, const std::string& action) {
       wake.push_back(timing[i].wake_ns);
       compute.push_back(timing[i].compute_ns);
       total.push_back(timing[i].total_ns);
-      if ((timing[i].flags & kTelemetryFlagEstop) != 0 && i < replay->ticks.size()) {
+      if ((timing[i].flags & record::kFlagEstop) != 0 && i < replay->ticks.size()) {
         ++estop_ticks;
         const auto& f = replay->ticks[i].force;
         if (f[0] != 0 || f[1] != 0 || f[2] != 0) ++estop_force_ticks;
@@ -1100,7 +1095,7 @@ int RunCases(Context& cx, const std::string& action) {
       m.failures.push_back("the case wires an e-stop but no tick saw it asserted");
     if (!c.swap_field.empty()) {
       const auto swapped =
-          std::ranges::find_if(timing, [](const auto& t) { return (t.flags & kTelemetryFlagSwap) != 0; });
+          std::ranges::find_if(timing, [](const auto& t) { return (t.flags & record::kFlagSwap) != 0; });
       if (swapped == timing.end())
         m.failures.push_back(
             fmt::format("the case swaps to field {} at tick {}, but no tick took it", c.swap_field, c.swap_at));

@@ -951,7 +951,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
               ++closed;
             }
       }
-
   st.face_nodes_closed = closed + far_faces.load();
 }
 
@@ -964,18 +963,17 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
   if (n < 2 || normals.size() != n || inner.centres.size() != n || !(grid.voxel_m > 0.0) || !(reach_m > 0.0))
     return std::nullopt;
   const double step = 0.5 * SparseField::kBrick * grid.voxel_m;
-  const V3 grid_lo = grid.origin_m;
-  const V3 grid_hi = grid.Node(grid.dims[0] - 1, grid.dims[1] - 1, grid.dims[2] - 1);
+  const Eigen::AlignedBox3d grid_box(grid.origin_m, grid.Node(grid.dims[0] - 1, grid.dims[1] - 1, grid.dims[2] - 1));
   // Nothing the rule puts inside lies outside the union of the inner balls.
-  V3 balls_lo = V3::Constant(std::numeric_limits<double>::infinity());
-  V3 balls_hi = -balls_lo;
+  Eigen::AlignedBox3d balls;
   for (std::size_t i = 0; i < n; ++i) {
-    balls_lo = balls_lo.cwiseMin(inner.centres[i] - V3::Constant(inner.radii[i]));
-    balls_hi = balls_hi.cwiseMax(inner.centres[i] + V3::Constant(inner.radii[i]));
+    balls.extend(V3(inner.centres[i] - V3::Constant(inner.radii[i])));
+    balls.extend(V3(inner.centres[i] + V3::Constant(inner.radii[i])));
   }
-  const V3 lo = balls_lo.cwiseMax(grid_lo - V3::Constant(reach_m));
-  const V3 hi = balls_hi.cwiseMin(grid_hi + V3::Constant(reach_m));
-  if ((lo.array() >= grid_lo.array()).all() && (hi.array() <= grid_hi.array()).all()) return std::nullopt;
+  const Eigen::AlignedBox3d search = balls.intersection(
+      Eigen::AlignedBox3d(grid_box.min() - V3::Constant(reach_m), grid_box.max() + V3::Constant(reach_m)));
+  if (grid_box.contains(search)) return std::nullopt;
+  const V3 lo = search.min(), hi = search.max();
   std::array<int, 3> count{};
   for (Eigen::Index a = 0; a < 3; ++a)
     count[static_cast<std::size_t>(a)] = std::max(1, static_cast<int>(std::ceil((hi[a] - lo[a]) / step)) + 1);
@@ -991,7 +989,7 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
       for (int j = 0; j < count[1]; ++j)
         for (int k = 0; k < count[2]; ++k) {
           const V3 p = lo + step * V3(i, j, k);
-          if ((p.array() >= grid_lo.array()).all() && (p.array() <= grid_hi.array()).all()) continue;
+          if (grid_box.contains(p)) continue;
           if (rule.Inside(winding(p), p)) box.extend(p);
         }
   });
@@ -1079,7 +1077,6 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     if (marked[b] != 0) candidates.push_back(b);
 
   const V3 origin_vox = grid.origin_m / h;
-  const auto brick_coords = [&](std::size_t brick) { return field.BrickCoords(brick); };
   // The kBrickCandidates samples nearest each candidate brick's centre, found once (centre test)
   // and kept for the evaluation.
   std::vector<std::int32_t> candidate_of(n_bricks, -1);
@@ -1089,7 +1086,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   tbb::enumerable_thread_specific<Scratch> scratch_tls;
   // The candidates of `brick` into s.sample (and its model into s).
   const auto find_candidates = [&](std::size_t brick, Scratch& s) {
-    const std::array<int, 3> bc = brick_coords(brick);
+    const std::array<int, 3> bc = field.BrickCoords(brick);
     const V3 centre = grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1)));
     s.idx.resize(kBrickCandidates);
     s.d2.resize(kBrickCandidates);
@@ -1117,7 +1114,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     s.Load(model);
   };
   const auto evaluate = [&](std::size_t brick, Scratch& s, float* values) {
-    const std::array<int, 3> c = brick_coords(brick);
+    const std::array<int, 3> c = field.BrickCoords(brick);
     const std::array<double, 3> corner = {origin_vox.x() + c[0] * kB, origin_vox.y() + c[1] * kB,
                                           origin_vox.z() + c[2] * kB};
     const std::array<int, 3> box = {std::min(kB, grid.dims[0] - c[0] * kB), std::min(kB, grid.dims[1] - c[1] * kB),
@@ -1133,7 +1130,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     Scratch& s = scratch_tls.local();
     for (std::size_t c = r.begin(); c != r.end(); ++c) {
       gather(c, s);
-      const std::array<int, 3> bc = brick_coords(candidates[c]);
+      const std::array<int, 3> bc = field.BrickCoords(candidates[c]);
       const V3 centre = origin_vox + V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1));
       Lists all;
       all.np = all.nin = all.nout = s.sample.size();
@@ -1189,7 +1186,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     std::vector<std::uint8_t> want(n_bricks, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& r) {
       for (std::size_t t = r.begin(); t != r.end(); ++t) {
-        const std::array<int, 3> c = brick_coords(todo[t]);
+        const std::array<int, 3> c = field.BrickCoords(todo[t]);
         const float* v = field.BrickValues(todo[t]);
         for (int f = 0; f < 6; ++f) {
           std::array<int, 3> nb = c;

@@ -8,6 +8,7 @@
 #include <array>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <type_traits>
 
 #include "iso_surface_internal.h"
@@ -34,48 +35,47 @@ void VolumeToMesh(const palpa::blob::FieldView& field, std::vector<Eigen::Vector
     constexpr int kB = palpa::blob::kBrick;
     constexpr std::int32_t kNoCrossing = 65536 + 65536 / 4;  // 1.25 voxels, Q16.16
     auto acc = grid->getAccessor();
-    std::array<std::int32_t, palpa::blob::kBrickNodes> q16{};
     const auto to_float = [](std::int32_t q) { return static_cast<float>(q) / 65536.0f; };
-    for (int bi = 0; kB * bi < field.dims[0]; ++bi)
-      for (int bj = 0; kB * bj < field.dims[1]; ++bj)
-        for (int bk = 0; kB * bk < field.dims[2]; ++bk) {
-          const int ni = std::min(kB, field.dims[0] - kB * bi), nj = std::min(kB, field.dims[1] - kB * bj),
-                    nk = std::min(kB, field.dims[2] - kB * bk);
-          const openvdb::Coord origin(kB * bi, kB * bj, kB * bk);
-          const std::optional<std::int32_t> one = palpa::mesh::BlockQ16(field, {bi, bj, bk}, q16);
-          if (one && to_float(*one) == background) continue;
-          if (one && ni == kB && nj == kB && nk == kB) {
-            grid->tree().addTile(1, origin, to_float(*one), false);
-            continue;
-          }
-          if (!one) {
-            // No edge of a block whose nodes are all farther than kNoCrossing from 0 on one side
-            // crosses the surface: palpa's fields keep axis neighbours within 1 voxel (the
-            // proxy needs it; FieldShape tests), 1 + 2/256 after v2's Q7.8. volumeToMesh reads
-            // only the values at crossing edges' ends, so such a block needs no leaf (half the
-            // leaves of the kitten's band, and with them half of volumeToMesh's work space). A
-            // blob from elsewhere with steeper neighbours may mesh differently beside one.
-            bool far_in = true, far_out = true;
-            for (int a = 0; a < ni; ++a)
-              for (int b = 0; b < nj; ++b)
-                for (int c = 0; c < nk; ++c) {
-                  const std::int32_t v = q16[static_cast<std::size_t>((a * kB + b) * kB + c)];
-                  far_in = far_in && v < -kNoCrossing;
-                  far_out = far_out && v > kNoCrossing;
-                }
-            if (far_out) continue;
-            if (far_in && ni == kB && nj == kB && nk == kB) {
-              grid->tree().addTile(1, origin, -background, false);
-              continue;
-            }
-          }
-          for (int a = 0; a < ni; ++a)
-            for (int b = 0; b < nj; ++b)
-              for (int c = 0; c < nk; ++c) {
-                const float v = one ? to_float(*one) : to_float(q16[static_cast<std::size_t>((a * kB + b) * kB + c)]);
-                if (v != background) acc.setValueOn(origin.offsetBy(a, b, c), v);
-              }
-        }
+    palpa::mesh::ForEachBlockQ16(field,
+                                 [&](std::array<int, 3> block, std::array<int, 3> n, std::optional<std::int32_t> one,
+                                     std::span<const std::int32_t, palpa::blob::kBrickNodes> q16) {
+                                   const openvdb::Coord origin(kB * block[0], kB * block[1], kB * block[2]);
+                                   const bool whole = n[0] == kB && n[1] == kB && n[2] == kB;
+                                   if (one && to_float(*one) == background) return;
+                                   if (one && whole) {
+                                     grid->tree().addTile(1, origin, to_float(*one), false);
+                                     return;
+                                   }
+                                   const auto value = [&](int a, int b, int c) {
+                                     return one ? *one : q16[static_cast<std::size_t>((a * kB + b) * kB + c)];
+                                   };
+                                   if (!one) {
+                                     // No edge of a block whose nodes are all farther than kNoCrossing from 0 on one
+                                     // side crosses the surface: palpa's fields keep axis neighbours within 1 voxel
+                                     // (the proxy needs it; FieldShape tests), 1 + 2/256 after v2's Q7.8. volumeToMesh
+                                     // reads only the values at crossing edges' ends, so such a block needs no leaf
+                                     // (half the leaves of the kitten's band, and with them half of volumeToMesh's work
+                                     // space). A blob from elsewhere with steeper neighbours may mesh differently
+                                     // beside one.
+                                     bool far_in = true, far_out = true;
+                                     for (int a = 0; a < n[0]; ++a)
+                                       for (int b = 0; b < n[1]; ++b)
+                                         for (int c = 0; c < n[2]; ++c) {
+                                           far_in = far_in && value(a, b, c) < -kNoCrossing;
+                                           far_out = far_out && value(a, b, c) > kNoCrossing;
+                                         }
+                                     if (far_out) return;
+                                     if (far_in && whole) {
+                                       grid->tree().addTile(1, origin, -background, false);
+                                       return;
+                                     }
+                                   }
+                                   for (int a = 0; a < n[0]; ++a)
+                                     for (int b = 0; b < n[1]; ++b)
+                                       for (int c = 0; c < n[2]; ++c)
+                                         if (const float v = to_float(value(a, b, c)); v != background)
+                                           acc.setValueOn(origin.offsetBy(a, b, c), v);
+                                 });
   }
   openvdb::tools::pruneLevelSet(grid->tree());
 

@@ -103,29 +103,15 @@ std::expected<std::vector<std::byte>, FileError> ReadBounded(std::string_view pa
   if (size > max_bytes) return too_large(size);
   std::vector<std::byte> data(static_cast<std::size_t>(size));
   std::size_t got = 0;
+  // The size at open may be stale (a growing file): past it, read on up to the cap plus one byte.
+  // Past it, reads go to a small probe first, so that a file of the size at open (the usual case)
+  // is never copied into a vector grown to twice its size.
   std::array<std::byte, 4096> probe{};
   while (true) {
-    if (got == data.size()) {
-      // The size at open may be stale (a growing file): read on, up to the cap plus one byte. The
-      // end is probed into a small buffer first, so that a file of the size at open (the usual
-      // case) is never copied into a vector grown to twice its size.
-      if (data.size() > max_bytes) return too_large(0);
-      const ssize_t more = ::read(*fd, probe.data(), probe.size());
-      if (more < 0) {
-        if (errno == EINTR) continue;
-        const std::string why = std::strerror(errno);
-        ::close(*fd);
-        return std::unexpected(System(Quote(path) + ": cannot read the " + std::string(what) + ": " + why));
-      }
-      if (more == 0) break;
-      data.resize(static_cast<std::size_t>(std::min<std::uint64_t>(max_bytes + 1, data.size() + 65536)));
-      const std::size_t kept = std::min(static_cast<std::size_t>(more), data.size() - got);
-      std::memcpy(data.data() + got, probe.data(), kept);
-      got += kept;
-      if (kept < static_cast<std::size_t>(more)) break;  // past the cap plus one: too large below
-      continue;
-    }
-    const ssize_t n = ::read(*fd, data.data() + got, data.size() - got);
+    const bool full = got == data.size();
+    if (full && data.size() > max_bytes) return too_large(0);
+    const ssize_t n =
+        full ? ::read(*fd, probe.data(), probe.size()) : ::read(*fd, data.data() + got, data.size() - got);
     if (n < 0) {
       if (errno == EINTR) continue;
       const std::string why = std::strerror(errno);
@@ -133,7 +119,15 @@ std::expected<std::vector<std::byte>, FileError> ReadBounded(std::string_view pa
       return std::unexpected(System(Quote(path) + ": cannot read the " + std::string(what) + ": " + why));
     }
     if (n == 0) break;
-    got += static_cast<std::size_t>(n);
+    if (!full) {
+      got += static_cast<std::size_t>(n);
+      continue;
+    }
+    data.resize(static_cast<std::size_t>(std::min<std::uint64_t>(max_bytes + 1, data.size() + 65536)));
+    const std::size_t kept = std::min(static_cast<std::size_t>(n), data.size() - got);
+    std::memcpy(data.data() + got, probe.data(), kept);
+    got += kept;
+    if (kept < static_cast<std::size_t>(n)) break;  // past the cap plus one: too large below
   }
   ::close(*fd);
   if (got > max_bytes) return too_large(0);

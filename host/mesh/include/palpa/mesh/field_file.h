@@ -60,11 +60,11 @@ inline double PhiVoxels(const blob::FieldView& f, int i, int j, int k) {
 }
 
 /// The nodes of the 8³ block (8·bi .. 8·bi + 7, ...) as PhiQ16 reads them, without a dense copy:
-/// returns the one value of every node of the block inside the grid when they all have it (a v2
-/// uniform slot at once; a v1 block after comparing them), else writes them to `q16` (local index
-/// (a·8 + b)·8 + c; nodes past the grid's edge are left as they were) and returns nullopt.
-/// block[a] < ceil(dims[a] / 8).
-inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array<int, 3> block,
+/// `n` nodes along each axis lie inside the grid (8 but at the far faces). Returns the one value
+/// of those nodes when they all have it (a v2 uniform slot at once; a v1 block after comparing
+/// them), else writes them to `q16` (local index (a·8 + b)·8 + c; the rest left as it was) and
+/// returns nullopt.
+inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array<int, 3> block, std::array<int, 3> n,
                                             std::span<std::int32_t, blob::kBrickNodes> q16) {
   constexpr int kB = blob::kBrick;
   const std::int32_t band = std::max(f.band_voxels, f.band_outside) * 65536;
@@ -77,20 +77,34 @@ inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array
     if ((e & blob::kSlotEmpty) != 0)
       return std::clamp(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256, -band, band);
   }
-  const int ni = std::min(kB, f.dims[0] - kB * block[0]);
-  const int nj = std::min(kB, f.dims[1] - kB * block[1]);
-  const int nk = std::min(kB, f.dims[2] - kB * block[2]);
   bool uniform = true;
   const std::int32_t first = PhiQ16(f, kB * block[0], kB * block[1], kB * block[2]);
-  for (int a = 0; a < ni; ++a)
-    for (int b = 0; b < nj; ++b)
-      for (int c = 0; c < nk; ++c) {
+  for (int a = 0; a < n[0]; ++a)
+    for (int b = 0; b < n[1]; ++b)
+      for (int c = 0; c < n[2]; ++c) {
         const std::int32_t v = PhiQ16(f, kB * block[0] + a, kB * block[1] + b, kB * block[2] + c);
         q16[static_cast<std::size_t>((a * kB + b) * kB + c)] = v;
         uniform = uniform && v == first;
       }
   if (uniform && f.phi != nullptr) return first;
   return std::nullopt;
+}
+
+/// Every 8³ block of the grid, x slowest: fn(block, n, one, q16) with BlockQ16's `n`, result and
+/// values (q16 is valid when `one` is empty).
+template <typename Fn>
+void ForEachBlockQ16(const blob::FieldView& f, Fn&& fn) {
+  constexpr int kB = blob::kBrick;
+  std::array<std::int32_t, blob::kBrickNodes> q16{};
+  for (int bi = 0; kB * bi < f.dims[0]; ++bi)
+    for (int bj = 0; kB * bj < f.dims[1]; ++bj)
+      for (int bk = 0; kB * bk < f.dims[2]; ++bk) {
+        const std::array<int, 3> block{bi, bj, bk};
+        const std::array<int, 3> n{std::min(kB, f.dims[0] - kB * bi), std::min(kB, f.dims[1] - kB * bj),
+                                   std::min(kB, f.dims[2] - kB * bk)};
+        const std::optional<std::int32_t> one = BlockQ16(f, block, n, q16);
+        fn(block, n, one, std::span<const std::int32_t, blob::kBrickNodes>(q16));
+      }
 }
 
 /// The smallest and largest PhiQ16 over the grid, block by block (BlockQ16).
