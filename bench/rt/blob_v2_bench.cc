@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -27,10 +28,8 @@ using palpa::sampler::GridPos;
 using palpa::sampler::TrilinearSampler;
 
 struct Fixture {
-  std::vector<std::byte> bytes;
-  palpa::blob::FieldView v2;
-  std::vector<std::int32_t> dense;
-  palpa::blob::FieldView v1;
+  std::optional<palpa::blob::VerifiedField> v2;
+  std::optional<palpa::blob::VerifiedField> v1;   // blob::DenseV1 of v2: the same values, dense
   std::vector<GridPos> points;                    // random, in band
   std::vector<GridPos> strokes;                   // coherent walks
   std::vector<std::array<std::int32_t, 3>> octs;  // octants of the points' cells, for the lookups
@@ -59,39 +58,34 @@ std::vector<std::byte> SphereBlob() {
 
 bool Prepare(const std::string& path) {
   Fixture& f = Get();
+  std::vector<std::byte> bytes;
   if (path.empty()) {
-    f.bytes = SphereBlob();
+    bytes = SphereBlob();
   } else {
     auto b = palpa::blob::ReadFile(path.c_str(), palpa::blob::Load::kAsStored);
     if (!b) {
       std::fprintf(stderr, "%s: %s\n", path.c_str(), b.error().what());
       return false;
     }
-    f.bytes = std::move(*b);
+    bytes = std::move(*b);
   }
-  auto v = palpa::blob::Verify(f.bytes);
-  if (!v || v->version != palpa::blob::kVersion2) {
+  auto v = palpa::blob::VerifyOwned(std::move(bytes));
+  if (!v || v->view().version != palpa::blob::kVersion2) {
     std::fprintf(stderr, "need a valid v2 blob: %s\n", v ? "this is v1" : v.error().what());
     return false;
   }
-  f.v2 = *v;
-  f.dense = palpa::blob::DenseQ16(f.v2);
-  f.v1 = f.v2;
-  f.v1.phi = f.dense.data();
-  f.v1.brick_index = nullptr;
-  f.v1.brick_tables = nullptr;
-  f.v1.octants = nullptr;
-  f.v1.band_voxels = f.v2.band_outside;
-  const TrilinearSampler s(f.v2);
+  f.v2.emplace(std::move(*v));
+  f.v1.emplace(palpa::blob::VerifyOwned(palpa::blob::DenseV1(f.v2->view())).value());
+  const TrilinearSampler s(f.v2->view());
   std::mt19937 rng(5);
   std::array<std::uniform_int_distribution<std::int32_t>, 3> u = {
-      std::uniform_int_distribution<std::int32_t>(0, (f.v2.dims[0] - 1) << 16),
-      std::uniform_int_distribution<std::int32_t>(0, (f.v2.dims[1] - 1) << 16),
-      std::uniform_int_distribution<std::int32_t>(0, (f.v2.dims[2] - 1) << 16)};
+      std::uniform_int_distribution<std::int32_t>(0, (f.v2->view().dims[0] - 1) << 16),
+      std::uniform_int_distribution<std::int32_t>(0, (f.v2->view().dims[1] - 1) << 16),
+      std::uniform_int_distribution<std::int32_t>(0, (f.v2->view().dims[2] - 1) << 16)};
   while (f.points.size() < 4096) {
     const GridPos p{u[0](rng), u[1](rng), u[2](rng)};
     const std::int32_t phi = s.Phi(p);
-    if (phi > -(f.v2.band_voxels << 16) && phi < (f.v2.band_outside << 16)) {
+    if (phi > -(f.v2->view().band_voxels << 16) && phi < (f.v2->view().band_outside << 16)) {
       f.points.push_back(p);
       f.octs.push_back({p.x >> 18, p.y >> 18, p.z >> 18});
     }
@@ -108,13 +102,14 @@ bool Prepare(const std::string& path) {
       const GridPos q{p.x + static_cast<std::int32_t>(6554 * d[0] / l),
                       p.y + static_cast<std::int32_t>(6554 * d[1] / l),
                       p.z + static_cast<std::int32_t>(6554 * d[2] / l)};
-      if (q.x >= 0 && q.y >= 0 && q.z >= 0 && q.x <= (f.v2.dims[0] - 1) << 16 && q.y <= (f.v2.dims[1] - 1) << 16 &&
-          q.z <= (f.v2.dims[2] - 1) << 16)
+      if (q.x >= 0 && q.y >= 0 && q.z >= 0 && q.x <= (f.v2->view().dims[0] - 1) << 16 &&
+          q.y <= (f.v2->view().dims[1] - 1) << 16 && q.z <= (f.v2->view().dims[2] - 1) << 16)
         p = q;
     }
   }
-  std::printf("field: %d x %d x %d nodes, %u bricks, %u octants, %zu bytes; %zu in-band points\n", f.v2.dims[0],
-              f.v2.dims[1], f.v2.dims[2], f.v2.brick_count, f.v2.octant_count, f.bytes.size(), f.points.size());
+  std::printf("field: %d x %d x %d nodes, %u bricks, %u octants, %zu bytes; %zu in-band points\n", f.v2->view().dims[0],
+              f.v2->view().dims[1], f.v2->view().dims[2], f.v2->view().bricks()->brick_count(),
+              f.v2->view().bricks()->octant_count(), f.v2->view().blob_size, f.points.size());
   return true;
 }
 
@@ -123,7 +118,7 @@ bool Prepare(const std::string& path) {
 template <bool kGradient, bool kBricks, bool kStrokes, bool kCached = false>
 void BM_Sample(benchmark::State& state) {
   const Fixture& f = Get();
-  const TrilinearSampler s(kBricks ? f.v2 : f.v1);
+  const TrilinearSampler s(kBricks ? f.v2->view() : f.v1->view());
   const std::vector<GridPos>& points = kStrokes ? f.strokes : f.points;
   palpa::sampler::PhiCache phi_cache;
   palpa::sampler::GradientCache gradient_cache;
@@ -145,52 +140,54 @@ void BM_Sample(benchmark::State& state) {
 // Octant lookup alone: octant → data pointer through the dense slot index and the brick's octant
 // table (two dependent loads), or through a linear-probing hash of the stored octants (what a
 // hash index would cost instead; uniform regions would then also need their φ somewhere).
-const std::int16_t* DenseLookup(const palpa::blob::FieldView& v, const std::array<std::int32_t, 3>& o) {
-  const std::size_t slot = (static_cast<std::size_t>(o[0] >> 1) * static_cast<std::size_t>(v.brick_dims[1]) +
+const std::int16_t* DenseLookup(const palpa::blob::BrickAccessor& v, const std::array<std::int32_t, 3>& o) {
+  const std::size_t slot = (static_cast<std::size_t>(o[0] >> 1) * static_cast<std::size_t>(v.brick_dims()[1]) +
                             static_cast<std::size_t>(o[1] >> 1)) *
-                               static_cast<std::size_t>(v.brick_dims[2]) +
+                               static_cast<std::size_t>(v.brick_dims()[2]) +
                            static_cast<std::size_t>(o[2] >> 1);
-  std::uint32_t e = v.brick_index[slot];
+  std::uint32_t e = v.index()[slot];
   if ((e & palpa::blob::kSlotEmpty) != 0) return nullptr;
-  e = v.brick_tables[8 * std::size_t{e} + static_cast<std::size_t>(((o[0] & 1) << 2) | ((o[1] & 1) << 1) | (o[2] & 1))];
+  e = v.tables()[8 * std::size_t{e} + static_cast<std::size_t>(((o[0] & 1) << 2) | ((o[1] & 1) << 1) | (o[2] & 1))];
   if ((e & palpa::blob::kSlotEmpty) != 0) return nullptr;
-  return v.octants + std::size_t{e} * 64;
+  return v.octants() + std::size_t{e} * 64;
 }
 
 void BM_LookupDenseIndex(benchmark::State& state) {
   const Fixture& f = Get();
   std::size_t n = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(DenseLookup(f.v2, f.octs[n]));
+    benchmark::DoNotOptimize(DenseLookup(*f.v2->view().bricks(), f.octs[n]));
     n = (n + 1) & 4095;
   }
-  state.counters["index_bytes"] = static_cast<double>(4 * static_cast<std::size_t>(f.v2.brick_dims[0]) *
-                                                          static_cast<std::size_t>(f.v2.brick_dims[1]) *
-                                                          static_cast<std::size_t>(f.v2.brick_dims[2]) +
-                                                      32 * std::size_t{f.v2.brick_count});
+  state.counters["index_bytes"] =
+      static_cast<double>(4 * static_cast<std::size_t>(f.v2->view().bricks()->brick_dims()[0]) *
+                              static_cast<std::size_t>(f.v2->view().bricks()->brick_dims()[1]) *
+                              static_cast<std::size_t>(f.v2->view().bricks()->brick_dims()[2]) +
+                          32 * std::size_t{f.v2->view().bricks()->brick_count()});
 }
 
 void BM_LookupHash(benchmark::State& state) {
   const Fixture& f = Get();
-  const std::array<std::uint32_t, 3> od = {2 * static_cast<std::uint32_t>(f.v2.brick_dims[0]),
-                                           2 * static_cast<std::uint32_t>(f.v2.brick_dims[1]),
-                                           2 * static_cast<std::uint32_t>(f.v2.brick_dims[2])};
+  const std::array<std::uint32_t, 3> od = {2 * static_cast<std::uint32_t>(f.v2->view().bricks()->brick_dims()[0]),
+                                           2 * static_cast<std::uint32_t>(f.v2->view().bricks()->brick_dims()[1]),
+                                           2 * static_cast<std::uint32_t>(f.v2->view().bricks()->brick_dims()[2])};
   const auto key = [&](const std::array<std::int32_t, 3>& o) {
     return (static_cast<std::uint32_t>(o[0]) * od[1] + static_cast<std::uint32_t>(o[1])) * od[2] +
            static_cast<std::uint32_t>(o[2]);
   };
   std::size_t cap = 1;
-  while (cap < 2 * std::size_t{f.v2.octant_count} + 2) cap <<= 1;  // load ≤ 0.5
-  std::vector<std::uint64_t> table(cap, ~std::uint64_t{0});        // (key << 32) | octant
+  while (cap < 2 * std::size_t{f.v2->view().bricks()->octant_count()} + 2) cap <<= 1;  // load ≤ 0.5
+  std::vector<std::uint64_t> table(cap, ~std::uint64_t{0});                            // (key << 32) | octant
   const auto hash = [&](std::uint32_t k) { return (k * 0x9E3779B1U) & (cap - 1); };
   for (std::int32_t x = 0; x < static_cast<std::int32_t>(od[0]); ++x)
     for (std::int32_t y = 0; y < static_cast<std::int32_t>(od[1]); ++y)
       for (std::int32_t z = 0; z < static_cast<std::int32_t>(od[2]); ++z) {
-        const std::int16_t* p = DenseLookup(f.v2, {x, y, z});
+        const std::int16_t* p = DenseLookup(*f.v2->view().bricks(), {x, y, z});
         if (p == nullptr) continue;
         std::size_t h = hash(key({x, y, z}));
         while (table[h] != ~std::uint64_t{0}) h = (h + 1) & (cap - 1);
-        table[h] = (std::uint64_t{key({x, y, z})} << 32) | static_cast<std::uint64_t>((p - f.v2.octants) / 64);
+        table[h] = (std::uint64_t{key({x, y, z})} << 32) |
+                   static_cast<std::uint64_t>((p - f.v2->view().bricks()->octants()) / 64);
       }
   std::size_t n = 0;
   for (auto _ : state) {
@@ -199,7 +196,7 @@ void BM_LookupHash(benchmark::State& state) {
     const std::int16_t* p = nullptr;
     while (table[h] != ~std::uint64_t{0}) {
       if ((table[h] >> 32) == k) {
-        p = f.v2.octants + (table[h] & 0xFFFFFFFFU) * 64;
+        p = f.v2->view().bricks()->octants() + (table[h] & 0xFFFFFFFFU) * 64;
         break;
       }
       h = (h + 1) & (cap - 1);

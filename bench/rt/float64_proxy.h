@@ -49,7 +49,7 @@ class Float64Field {
  public:
   /// `s` samples `f` (its Lipschitz bound and background are used; on blob v2 it also fetches).
   Float64Field(const blob::FieldView& f, const sampler::TrilinearSampler& s)
-      : phi_(f.phi),
+      : phi_(f.dense() != nullptr ? f.dense()->data() : nullptr),  // v2: fetched through the sampler
         sampler_(&s),
         dims_(f.dims),
         si_(static_cast<std::ptrdiff_t>(f.dims[1]) * f.dims[2]),

@@ -17,15 +17,10 @@ namespace {
   std::exit(2);
 }
 
-std::unique_ptr<Field> Finish(std::vector<std::byte> bytes, const std::string& name) {
-  auto f = std::make_unique<Field>();
-  f->bytes = std::move(bytes);
-  auto view = blob::Verify(f->bytes);
-  if (!view) Die(name + ": " + view.error().what());
-  f->view = *view;
-  f->stored_view = *view;
-  f->sampler = std::make_unique<sampler::TrilinearSampler>(f->view);
-  return f;
+blob::VerifiedField Verified(std::vector<std::byte> bytes, const std::string& name) {
+  auto field = blob::VerifyOwned(std::move(bytes));
+  if (!field) Die(name + ": " + field.error().what());
+  return std::move(*field);
 }
 
 std::unique_ptr<Field> Analytic(std::uint32_t n, double voxel_m,
@@ -44,17 +39,13 @@ std::unique_ptr<Field> Analytic(std::uint32_t n, double voxel_m,
   meta.origin_m = {-half, -half, -half};
   meta.voxel_m = voxel_m;
   meta.band_voxels = static_cast<std::uint32_t>(kBand);
-  auto f = Finish(blob::Encode(meta, phi), name);
+  std::optional<blob::VerifiedField> stored;
   if (storage == Storage::kV2) {  // stored as palpa build's default (bands 6 and 2), view dense
     blob::BlobMetaV2 m;
     m.meta = meta;
-    f->stored_bytes = blob::EncodeV2(m, phi);
-    auto view = blob::Verify(f->stored_bytes);
-    if (!view) Die(name + " (v2): " + view.error().what());
-    f->stored_view = *view;
-    f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
+    stored.emplace(Verified(blob::EncodeV2(m, phi), name + " (v2)"));
   }
-  return f;
+  return std::make_unique<Field>(Verified(blob::Encode(meta, phi), name), std::move(stored));
 }
 
 sampler::GridPos ToGrid(const Vec3d& x_vox) {
@@ -90,15 +81,11 @@ bool Project(const Float64Field& f, Vec3d& x, Vec3d& normal) {
 std::unique_ptr<Field> LoadField(const std::string& path) {
   auto stored = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
   if (!stored) Die(path + ": " + stored.error().what());
-  auto view = blob::Verify(*stored);
-  if (!view) Die(path + ": " + view.error().what());
-  if (view->version != blob::kVersion2) return Finish(std::move(*stored), path);
+  blob::VerifiedField field = Verified(std::move(*stored), path);
+  if (field.view().version != blob::kVersion2) return std::make_unique<Field>(std::move(field), std::nullopt);
   // v2: the fixed-point tick samples the bricks in place, as palpad; `view` is the dense form.
-  auto f = Finish(blob::DenseV1(*view), path);
-  f->stored_bytes = std::move(*stored);  // the buffer moves, so `view` still points into it
-  f->stored_view = *view;
-  f->sampler = std::make_unique<sampler::TrilinearSampler>(f->stored_view);
-  return f;
+  blob::VerifiedField dense = Verified(blob::DenseV1(field.view()), path);
+  return std::make_unique<Field>(std::move(dense), std::move(field));
 }
 
 std::unique_ptr<Field> SphereField(std::uint32_t n, double voxel_m, double radius_vox, Storage storage) {
@@ -133,7 +120,8 @@ Scenario SurfaceStrokes(const Field& f, const std::string& name, double depth_m,
                 static_cast<std::size_t>(d[2]) +
             static_cast<std::size_t>(k);
         const std::size_t b = a + static_cast<std::size_t>(d[1]) * static_cast<std::size_t>(d[2]);
-        const std::int32_t va = f.view.phi[a], vb = f.view.phi[b];
+        const std::int32_t* phi = f.view.dense()->data();
+        const std::int32_t va = phi[a], vb = phi[b];
         if ((va < 0) != (vb < 0)) crossings.push_back({i + static_cast<double>(va) / (va - vb), 1.0 * j, 1.0 * k});
       }
   if (crossings.empty()) Die(name + ": the field has no surface");

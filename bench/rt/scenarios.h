@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,18 +17,26 @@
 
 namespace palpa::bench {
 
-/// A verified blob kept in place with its sampler. Not movable (the views point into the bytes).
+/// A verified blob kept in place with its sampler. Not movable (the views refer to the fields).
 /// `sampler` reads the blob as stored, as palpad does (a v2 blob's bricks in place); `view` is
 /// the dense v1 form of the same values (identical for a v1 blob), which the float64 reference
 /// and the scenario builders index directly.
 struct Field {
-  std::vector<std::byte> bytes;
-  blob::FieldView view;
-  std::vector<std::byte> stored_bytes;  ///< empty: `bytes` is the stored form
-  blob::FieldView stored_view;
+  Field(blob::VerifiedField dense_form, std::optional<blob::VerifiedField> stored_form)
+      : dense(std::move(dense_form)),
+        stored(std::move(stored_form)),
+        view(dense.view()),
+        stored_view(stored ? stored->view() : dense.view()),
+        sampler(std::make_unique<sampler::TrilinearSampler>(stored_view)) {}
+  Field(const Field&) = delete;
+  Field& operator=(const Field&) = delete;
+
+  blob::VerifiedField dense;                           ///< the dense v1 form
+  std::optional<blob::VerifiedField> stored;           ///< the stored form when it is not `dense` (v2)
+  const blob::FieldView& view;                         ///< dense.view()
+  const blob::FieldView& stored_view;                  ///< the blob as stored
   std::unique_ptr<sampler::TrilinearSampler> sampler;  ///< samples the stored form
-  /// The blob as stored: stored_view, or view when that is the stored form.
-  const blob::FieldView& Stored() const { return stored_bytes.empty() ? view : stored_view; }
+  const blob::FieldView& Stored() const { return stored_view; }
 };
 
 /// Reads and verifies a .palpa blob; exits with a message naming the file on any error.

@@ -373,7 +373,7 @@ TEST_F(Cli, InfoExportAndTraceSynthOnSphere926) {
   for (std::size_t n = 0; n < count; n += 97) {
     float v = 0;
     std::memcpy(&v, data.data() + 10 + hlen + 4 * n, 4);
-    EXPECT_FLOAT_EQ(v, static_cast<float>(view.phi[n] / 65536.0 * view.voxel_m)) << n;
+    EXPECT_FLOAT_EQ(v, static_cast<float>(view.dense()->data()[n] / 65536.0 * view.voxel_m)) << n;
   }
 
   // trace synth poke 1 mm deep: the deepest HIP lies 1 mm inside the analytic sphere

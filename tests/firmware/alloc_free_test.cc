@@ -253,7 +253,7 @@ TEST(AllocFreeTick, MillionProxyTicksOnBlobV2AllocateNothing) {
   const std::vector<std::byte> bytes = blob::EncodeV2(meta, blob::DenseQ16(field.view()));
   const auto v2 = blob::Verify(bytes);
   ASSERT_TRUE(v2.has_value()) << v2.error().what();
-  ASSERT_EQ(v2->phi, nullptr) << "expected the brick storage";
+  ASSERT_NE(v2->bricks(), nullptr) << "expected the brick storage";
   MillionProxyTicksAllocateNothing(field, *v2);
 }
 

@@ -38,10 +38,9 @@ SphereField::SphereField(int n, double radius_vox, std::uint32_t band, double vo
       }
     }
   }
-  blob_ = blob::Encode(meta, phi);
-  auto v = blob::Verify(blob_);
+  auto v = blob::VerifyOwned(blob::Encode(meta, phi));
   if (!v) std::abort();  // fixture bug
-  view_ = *v;
+  field_.emplace(std::move(*v));
   for (std::size_t a = 0; a < 3; ++a) center_m_[a] = meta.origin_m[a] + center_vox[a] * voxel_m;
   radius_m_ = radius_vox * voxel_m;
 }

@@ -4,6 +4,8 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
+#include <span>
 #include <vector>
 
 #include "palpa/blob/blob.h"
@@ -12,7 +14,7 @@
 namespace palpa::firmware_test {
 
 /// φ = clamp(|x − c| − R, ±band) voxels at every node, as Q16.16, encoded and verified in place.
-/// Not movable: `view` points into `blob`.
+/// Not movable (callers keep references to its view).
 class SphereField {
  public:
   /// `center_vox`: sphere centre in grid coordinates (voxels); node (0,0,0) at `origin_m`.
@@ -21,8 +23,8 @@ class SphereField {
   SphereField(const SphereField&) = delete;
   SphereField& operator=(const SphereField&) = delete;
 
-  const blob::FieldView& view() const { return view_; }
-  const std::vector<std::byte>& bytes() const { return blob_; }
+  const blob::FieldView& view() const { return field_->view(); }
+  std::span<const std::byte> bytes() const { return field_->bytes(); }
   std::array<double, 3> center_m() const { return center_m_; }
   double radius_m() const { return radius_m_; }
   double voxel_m() const { return voxel_m_; }
@@ -31,8 +33,7 @@ class SphereField {
   std::array<double, 3> PointAt(double r_m, std::array<double, 3> dir) const;
 
  private:
-  std::vector<std::byte> blob_;
-  blob::FieldView view_;
+  std::optional<blob::VerifiedField> field_;
   std::array<double, 3> center_m_{};
   double radius_m_ = 0;
   double voxel_m_ = 0;

@@ -33,24 +33,12 @@ namespace {
 using testing::DataFile;
 
 // A v1 blob of a built field, as palpa build writes it (the payload straight from WriteQ16).
-struct Blob {
-  std::vector<std::int32_t> words;
-  blob::FieldView view;
-};
-
-Blob Encode(const BuildResult& built, const Transform& fit) {
+blob::VerifiedField Encode(const BuildResult& built, const Transform& fit) {
   const GridSpec& g = built.field.grid();
   const blob::BlobMeta meta = BlobMetaOf(g, FieldMethod::kHermite, {.transform = fit});
   std::vector<std::int32_t> phi(g.NodeCount());
   built.field.WriteQ16(phi);
-  const std::vector<std::byte> bytes = blob::Encode(meta, phi);
-  Blob out;
-  out.words.resize(bytes.size() / 4);
-  std::memcpy(out.words.data(), bytes.data(), bytes.size());
-  auto view = blob::Verify(std::as_bytes(std::span<const std::int32_t>(out.words)));
-  EXPECT_TRUE(view.has_value()) << view.error().what();
-  out.view = *view;
-  return out;
+  return blob::VerifyOwned(blob::Encode(meta, phi)).value();
 }
 
 struct Case {
@@ -71,8 +59,8 @@ Case Build(const PointSet& model, int cells, FieldMethod method, bool leak_guard
 }
 
 mesh::EvalResult Score(const Case& c, const mesh::Truth& truth, const char* what) {
-  const Blob b = Encode(c.built, c.fit);
-  auto result = mesh::Evaluate(b.view, truth);
+  const blob::VerifiedField b = Encode(c.built, c.fit);
+  auto result = mesh::Evaluate(b.view(), truth);
   EXPECT_TRUE(result.has_value()) << result.error().message;
   const mesh::EvalResult& r = *result;
   std::printf(
@@ -343,8 +331,8 @@ struct Leak {
 };
 
 Leak FalseInside(const Case& c, const mesh::Truth& truth, double box_half_model = 0.0) {
-  const Blob b = Encode(c.built, c.fit);
-  const auto t = mesh::TrueDistances(b.view, truth);
+  const blob::VerifiedField b = Encode(c.built, c.fit);
+  const auto t = mesh::TrueDistances(b.view(), truth);
   EXPECT_TRUE(t.has_value()) << t.error().message;
   Leak leak;
   const GridSpec& g = c.built.field.grid();

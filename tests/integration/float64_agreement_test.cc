@@ -87,10 +87,7 @@ TEST(Float64Agreement, KittenStrokes) {
   meta.method = blob::Method::kHermite;
   std::vector<std::int32_t> phi(g.NodeCount());
   built->field.WriteQ16(phi);
-  Field f;
-  f.bytes = blob::Encode(meta, phi);
-  f.view = blob::Verify(f.bytes).value();
-  f.sampler = std::make_unique<sampler::TrilinearSampler>(f.view);
+  Field f(blob::VerifyOwned(blob::Encode(meta, phi)).value(), std::nullopt);
   for (const auto& [name, depth] :
        {std::pair{"kitten free", -1e-3}, std::pair{"kitten shallow", 0.2e-3}, std::pair{"kitten deep", 2e-3}}) {
     Check(name, Compare(f, SurfaceStrokes(f, name, depth, 0.05, 8, 250, 1)));

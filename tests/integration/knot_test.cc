@@ -28,8 +28,9 @@ constexpr double kVoxel = 0.0002;    // 0.2 mm
 constexpr double kKnotSize = 0.012;  // longest side 12 mm: the tube is 1.7-2.2 mm (8-11 voxels) thick
 
 struct Knot {
-  std::vector<std::byte> bytes;
-  blob::FieldView view;
+  explicit Knot(blob::VerifiedField f) : blob(std::move(f)), view(blob.view()) {}
+  blob::VerifiedField blob;
+  const blob::FieldView& view;
   std::unique_ptr<sampler::TrilinearSampler> field;
   std::unique_ptr<mesh::TrueDistanceGrid> truth;  // exact signed distance to the mesh, voxels
   field::PointSet device;                         // the sampled oriented points, device metres
@@ -38,26 +39,25 @@ struct Knot {
 // Built once for all tests in this file (about a second).
 const Knot& GetKnot() {
   static const Knot* knot = [] {
-    auto* k = new Knot;
     auto m = mesh::ReadClosedMesh(PALPA_DATA_DIR "/knot1.off");
     EXPECT_TRUE(m.has_value()) << m.error().message;
     // 40,000 area-uniform points: about 1 per 0.01 mm² at this size, a dense scan.
     auto points = mesh::SampleSurface(*m, 40000, 1, "knot1.off");
     EXPECT_TRUE(points.has_value());
     const field::Transform transform = field::FitTransform(*points, kKnotSize);
-    k->device = field::ApplyTransform(transform, *points);
+    field::PointSet device = field::ApplyTransform(transform, *points);
     field::BuildOptions options;  // the default method, as `palpa build`
     options.grid.voxel_m = kVoxel;
-    auto built = field::BuildField(k->device.positions, k->device.normals, options);
+    auto built = field::BuildField(device.positions, device.normals, options);
     EXPECT_TRUE(built.has_value());
     const field::GridSpec& g = built->field.grid();
-    const blob::BlobMeta meta = field::BlobMetaOf(
-        g, field::FieldMethod::kHermite,
-        {.transform = transform, .point_count = static_cast<std::uint32_t>(k->device.positions.size())});
+    const blob::BlobMeta meta =
+        field::BlobMetaOf(g, field::FieldMethod::kHermite,
+                          {.transform = transform, .point_count = static_cast<std::uint32_t>(device.positions.size())});
     std::vector<std::int32_t> phi(g.NodeCount());
     built->field.WriteQ16(phi);
-    k->bytes = blob::Encode(meta, phi);
-    k->view = blob::Verify(k->bytes).value();
+    auto* k = new Knot(blob::VerifyOwned(blob::Encode(meta, phi)).value());
+    k->device = std::move(device);
     k->field = std::make_unique<sampler::TrilinearSampler>(k->view);
     auto truth = mesh::TrueDistances(k->view, mesh::Truth::Mesh(std::move(*m)), 4);
     EXPECT_TRUE(truth.has_value());

@@ -55,9 +55,12 @@ TEST(Blob, RoundTripVerifiesAndReadsInPlace) {
   EXPECT_EQ(v->dims[0], 5);
   EXPECT_EQ(v->band_voxels, 3);
   EXPECT_DOUBLE_EQ(v->voxel_m, 0.001);
-  EXPECT_EQ(reinterpret_cast<const std::byte*>(v->phi), bytes.data() + kHeaderSize);  // in place
+  ASSERT_NE(v->dense(), nullptr);
+  EXPECT_EQ(v->bricks(), nullptr);
+  EXPECT_EQ(reinterpret_cast<const std::byte*>(v->dense()->data()), bytes.data() + kHeaderSize);  // in place
   // Centre node: φ = −1.5 voxels.
-  EXPECT_EQ(v->phi[(2 * 5 + 2) * 5 + 2], -3 * 32768);
+  EXPECT_EQ(v->dense()->data()[(2 * 5 + 2) * 5 + 2], -3 * 32768);
+  EXPECT_EQ(v->NodeQ16(2, 2, 2), -3 * 32768);
 }
 
 TEST(Blob, HeaderFieldOffsetsMatchTheSpec) {

@@ -81,8 +81,9 @@ TEST(BlobV2, RoundTripStoresTheQuantisedClampedField) {
   const auto v = Verify(bytes);
   ASSERT_TRUE(v.has_value()) << v.error().what();
   EXPECT_EQ(v->version, 2);
-  EXPECT_EQ(v->phi, nullptr);
-  EXPECT_EQ(reinterpret_cast<const std::byte*>(v->brick_index), bytes.data() + kHeaderSizeV2);  // in place
+  EXPECT_EQ(v->dense(), nullptr);
+  ASSERT_NE(v->bricks(), nullptr);
+  EXPECT_EQ(reinterpret_cast<const std::byte*>(v->bricks()->index()), bytes.data() + kHeaderSizeV2);  // in place
   EXPECT_EQ(v->band_voxels, 2);
   EXPECT_EQ(v->band_outside, 1);
   // Every node: round(clamp(sdf, −2, 1)·256)·256, computed here from the closed form.
@@ -275,15 +276,17 @@ TEST(BlobV2, SamplerInPlaceEqualsDenseSamplingBitForBit) {
   const SphereGrid g = MakeSphere({45, 38, 30}, {21.3, 18.6, 14.2}, 9.7);
   const auto bytes = EncodeV2(Meta(g), g.q16);
   const auto v2 = Verify(bytes).value();
-  ASSERT_GT(v2.octant_count, 0u);
-  std::vector<std::int32_t> dense = DenseQ16(v2);
-  FieldView v1 = v2;
-  v1.phi = dense.data();
-  v1.brick_index = nullptr;
-  v1.brick_tables = nullptr;
-  v1.octants = nullptr;
-  v1.band_voxels = v2.band_outside;  // the dense sampler's background
-  const sampler::TrilinearSampler s2(v2), s1(v1);
+  ASSERT_GT(v2.bricks()->octant_count(), 0u);
+  // A v1 blob of the very same node values (its band wide enough to hold the free-space bounds),
+  // sampled with the brick sampler's background.
+  const std::vector<std::int32_t> dense = DenseQ16(v2);
+  BlobMeta m = Meta(g).meta;
+  m.band_voxels =
+      static_cast<std::uint32_t>((std::ranges::max(dense, {}, [](std::int32_t x) { return std::abs(x); }) >> 16) + 1);
+  const auto dense_bytes = Encode(m, dense);
+  const auto v1 = Verify(dense_bytes).value();
+  const sampler::BrickSampler s2(*v2.bricks(), v2.band_outside);
+  const sampler::DenseSampler s1(*v1.dense(), v2.band_outside);
   ASSERT_EQ(s1.background(), s2.background());
   std::mt19937 rng(11);
   int compared = 0;

@@ -146,8 +146,8 @@ TEST(Sampler, OutsideTheGridIsTheBoundaryExtendedOutwardAtEveryFaceEdgeAndCorner
   EXPECT_EQ(outside, 7 * 7 * 7 - 3 * 3 * 3);
   EXPECT_GT(not_background, 0);  // the sphere's faces are within the band: not the background
   // Exactly on the last node: the node's own value.
-  EXPECT_EQ(s.At({last, last, last}).phi, view.phi[6 * 6 * 6 - 1]);
-  EXPECT_EQ(s.Phi({0, 0, 0}), view.phi[0]);
+  EXPECT_EQ(s.At({last, last, last}).phi, view.dense()->data()[6 * 6 * 6 - 1]);
+  EXPECT_EQ(s.Phi({0, 0, 0}), view.dense()->data()[0]);
 }
 
 TEST(Sampler, WideStencilOnTheGridFacesRepeatsTheFaceNode) {
@@ -480,10 +480,11 @@ TEST(SampleCache, AHitReadsTheCacheNotTheIndex) {
   const GridPos p{20 * kOne + 9000, 15 * kOne + 30000, 10 * kOne + 100}, q{p.x + 2000, p.y - 3000, p.z + 4000};
   const GridPos elsewhere{5 * kOne, 5 * kOne, 5 * kOne};
   const std::int32_t i = p.x >> 16, j = p.y >> 16, k = p.z >> 16;  // cell (20, 15, 10): local (0, 3, 2)
+  const blob::BrickAccessor& b = *v.bricks();
   const std::uint32_t slot =
-      v.brick_index[static_cast<std::size_t>(((i >> 3) * v.brick_dims[1] + (j >> 3)) * v.brick_dims[2] + (k >> 3))];
+      b.index()[static_cast<std::size_t>(((i >> 3) * b.brick_dims()[1] + (j >> 3)) * b.brick_dims()[2] + (k >> 3))];
   ASSERT_EQ(slot & blob::kSlotEmpty, 0U);
-  auto* entry = const_cast<std::uint32_t*>(v.brick_tables + 8 * std::size_t{slot} +
+  auto* entry = const_cast<std::uint32_t*>(b.tables() + 8 * std::size_t{slot} +
                                            (((i >> 2) & 1) << 2 | ((j >> 2) & 1) << 1 | ((k >> 2) & 1)));
   ASSERT_EQ(*entry & blob::kSlotEmpty, 0U);
   PhiCache pc;

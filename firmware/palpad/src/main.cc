@@ -100,8 +100,8 @@ int Run(const palpa::palpad::Options& o) {
   palpa::servo::TelemetryDrain* live_drain = nullptr;  // set once the drain exists
   std::atomic<bool> loop_running{false};
   palpa::servo::ServoLoop* live_loop = nullptr;
-  std::vector<std::byte> blob;  // without --listen: the field file; outlives the loop
-  palpa::blob::FieldView field_view;
+  std::optional<palpa::blob::VerifiedField> owned;  // without --listen: the field file; outlives the loop
+  std::optional<palpa::blob::FieldView> field_view;
   if (!o.listen.empty()) {
     auto key = palpa::net::ReadKeyFile(o.key_file);
     if (!key) return Fail(kExitBadInput, "--key-file " + key.error().message);
@@ -139,18 +139,18 @@ int Run(const palpa::palpad::Options& o) {
     listener = std::move(*created);
     auto loaded = listener->LoadInitial(o.field_path);
     if (!loaded) return Fail(kExitBadInput, loaded.error());
-    field_view = *loaded;
+    field_view.emplace(*loaded);
     std::fprintf(stderr, "palpad: listening on %s:%u (uploads up to %.0f bytes)\n", o.listen_host.c_str(),
                  static_cast<unsigned>(listener->port()), o.max_blob);
   } else {
     // Field: read as stored (a v2 blob is sampled in place), then verify every byte before
-    // anything uses it. `blob` outlives the loop.
+    // anything uses it. `owned` outlives the loop.
     auto file = palpa::blob::ReadFile(o.field_path.c_str(), palpa::blob::Load::kAsStored);
     if (!file) return Fail(kExitBadInput, o.field_path + ": " + file.error().what());
-    blob = std::move(*file);
-    const auto field = palpa::blob::Verify(blob);
+    auto field = palpa::blob::VerifyOwned(std::move(*file));
     if (!field) return Fail(kExitBadInput, o.field_path + ": " + field.error().what());
-    field_view = *field;
+    owned.emplace(std::move(*field));
+    field_view.emplace(owned->view());
   }
 
   std::vector<palpa::trace::TraceSample> samples;  // the real Falcon is moved by hand: no trace
@@ -160,21 +160,22 @@ int Run(const palpa::palpad::Options& o) {
     samples = std::move(*read);
   }
 
-  const auto params = palpa::proxy::MakeProxyParams(config, field_view.voxel_m);
+  const auto params = palpa::proxy::MakeProxyParams(config, field_view->voxel_m);
   if (!params) return Fail(kExitBadInput, std::string("parameters: ") + params.error());
 
   // --swap-at N:FIELD: the second field, read and verified now like the first.
-  std::vector<std::byte> swap_blob;
+  std::optional<palpa::blob::VerifiedField> swap_blob;
   std::optional<palpa::servo::ServoField> swap_field;
   if (!o.swap_at_field.empty()) {
     auto file = palpa::blob::ReadFile(o.swap_at_field.c_str(), palpa::blob::Load::kAsStored);
     if (!file) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + file.error().what());
-    swap_blob = std::move(*file);
-    const auto view = palpa::blob::Verify(swap_blob);
-    if (!view) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + view.error().what());
-    const auto swap_params = palpa::proxy::MakeProxyParams(config, view->voxel_m);
+    auto verified = palpa::blob::VerifyOwned(std::move(*file));
+    if (!verified) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + verified.error().what());
+    swap_blob.emplace(std::move(*verified));
+    const palpa::blob::FieldView& view = swap_blob->view();
+    const auto swap_params = palpa::proxy::MakeProxyParams(config, view.voxel_m);
     if (!swap_params) return Fail(kExitBadInput, std::string("--swap-at parameters: ") + swap_params.error());
-    swap_field.emplace(*view, *swap_params, swap_blob.size());
+    swap_field.emplace(view, *swap_params, view.blob_size);
   }
 
   // Open the output now so that an unwritable path fails before the run, not after it.
@@ -237,7 +238,7 @@ int Run(const palpa::palpad::Options& o) {
     scripted_swap.emplace(*device, *swap_field, o.swap_at_tick);
     device = &*scripted_swap;
   }
-  palpa::servo::ServoLoop loop(field_view, *params, *device, sc, g_stop);
+  palpa::servo::ServoLoop loop(*field_view, *params, *device, sc, g_stop);
   if (scripted_swap) scripted_swap->Attach(loop);
   live_loop = &loop;
   if (listener) listener->Attach(loop);
@@ -258,9 +259,9 @@ int Run(const palpa::palpad::Options& o) {
     if (listener) {
       for (const auto b : listener->buffers()) buffers.emplace_back(b);
     } else {
-      buffers.emplace_back(std::span<const std::byte>(blob));
+      buffers.emplace_back(owned->bytes());
     }
-    if (!swap_blob.empty()) buffers.emplace_back(std::span<const std::byte>(swap_blob));
+    if (swap_blob) buffers.emplace_back(swap_blob->bytes());
     palpa::rt::RtRequest request;
     request.cpu = static_cast<int>(o.cpu);
     request.priority = static_cast<int>(o.priority);

@@ -65,12 +65,12 @@ int RunEval(const EvalArgs& args) {
     return kExitBadInput;
   }
   // As stored: Evaluate reads v2 in place and knows its two bands (a dense copy would not).
-  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);
+  auto field = mesh::LoadField(args.field);
   if (!field) {
     fmt::print(stderr, "palpa eval: {}\n", field.error().message);
     return kExitBadInput;
   }
-  const blob::FieldView& v = field->view;
+  const blob::FieldView& v = field->view();
 
   mesh::Truth truth;
   std::string truth_name;

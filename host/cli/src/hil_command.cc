@@ -40,6 +40,7 @@
 #include "commands.h"
 #include "field_sampler.h"
 #include "palpa/blob/blob.h"
+#include "palpa/mesh/field_file.h"
 #include "palpa/record/run_record.h"
 #include "palpa/trace/trace.h"
 
@@ -968,12 +969,6 @@ Json MetricsJson(const Case& c, const Replay& r, const Metrics& m, const Context
   return j;
 }
 
-struct LoadedField {
-  explicit LoadedField(std::vector<std::byte> b) : bytes(std::move(b)) {}
-  std::vector<std::byte> bytes;
-  blob::FieldView view;
-};
-
 int RunCases(Context& cx, const std::string& action) {
   const bool fast = cx.args.mode != "realtime";
   const bool bless = action == "bless";
@@ -1008,7 +1003,7 @@ int RunCases(Context& cx, const std::string& action) {
              cx.args.emulator.empty() ? "" : " under " + Join(cx.args.emulator), cx.k, cx.max_force, cx.rate);
   int failed = 0;
   std::string index = "[";
-  std::map<std::string, std::unique_ptr<LoadedField>> loaded_fields;
+  std::map<std::string, std::unique_ptr<blob::VerifiedField>> loaded_fields;
   std::vector<std::int64_t> all_wake, all_compute, all_total;
   for (const Case* cp : selected) {
     const Case& c = *cp;
@@ -1039,32 +1034,25 @@ int RunCases(Context& cx, const std::string& action) {
       return kExitBadInput;
     }
     // Each field is read and verified once per run (the sphere's is 108 MB).
-    const auto load = [&](const std::string& name, const fs::path& path) -> const LoadedField* {
+    const auto load = [&](const std::string& name, const fs::path& path) -> const blob::VerifiedField* {
       auto& loaded = loaded_fields[name];
       if (loaded) return loaded.get();
-      auto blob_bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // v2 sampled in place
-      if (!blob_bytes) {
-        fmt::print(stderr, "palpa hil: {}\n", blob_bytes.error().what());
+      auto read = mesh::LoadField(path.string());  // v2 sampled in place
+      if (!read) {
+        fmt::print(stderr, "palpa hil: {}\n", read.error().message);
         return nullptr;
       }
-      loaded = std::make_unique<LoadedField>(std::move(*blob_bytes));
-      auto view = blob::Verify(loaded->bytes);
-      if (!view) {
-        fmt::print(stderr, "palpa hil: {}: {}\n", path.string(), view.error().what());
-        loaded.reset();
-        return nullptr;
-      }
-      loaded->view = *view;
+      loaded = std::make_unique<blob::VerifiedField>(std::move(*read));
       return loaded.get();
     };
-    const LoadedField* loaded = load(c.field, *field);
+    const blob::VerifiedField* loaded = load(c.field, *field);
     if (loaded == nullptr) return kExitBadInput;
-    const FieldSampler sampler(loaded->view);
+    const FieldSampler sampler(loaded->view());
     std::optional<FieldSampler> swap_sampler;
     if (!c.swap_field.empty()) {
-      const LoadedField* swap_loaded = load(c.swap_field, cx.work / "fields" / (c.swap_field + ".palpa"));
+      const blob::VerifiedField* swap_loaded = load(c.swap_field, cx.work / "fields" / (c.swap_field + ".palpa"));
       if (swap_loaded == nullptr) return kExitBadInput;
-      swap_sampler.emplace(swap_loaded->view);
+      swap_sampler.emplace(swap_loaded->view());
     }
     // Timing and telemetry flags from palpad --record-timing (both modes).
     const auto timing = ReadTiming(replay->dir / "timing.csv");

@@ -18,19 +18,18 @@ namespace {
 using blob::MethodName;
 
 // Reads and verifies; prints the refusal naming the file, field and byte.
-std::optional<std::pair<std::vector<std::byte>, blob::FieldView>> Load(const std::string& path, const char* cmd) {
+std::optional<blob::VerifiedField> Load(const std::string& path, const char* cmd) {
   auto bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // v2 as stored: its own figures
   if (!bytes) {
     fmt::print(stderr, "palpa {}: {}\n", cmd, bytes.error().what());
     return std::nullopt;
   }
-  auto view = blob::Verify(*bytes);
-  if (!view) {
-    fmt::print(stderr, "palpa {}: {}: {}\n", cmd, path, view.error().what());
+  auto field = blob::VerifyOwned(std::move(*bytes));
+  if (!field) {
+    fmt::print(stderr, "palpa {}: {}: {}\n", cmd, path, field.error().what());
     return std::nullopt;
   }
-  // The view points into the vector's heap buffer, which moving the vector keeps in place.
-  return std::make_pair(std::move(*bytes), *view);
+  return std::move(*field);
 }
 
 }  // namespace
@@ -38,25 +37,27 @@ std::optional<std::pair<std::vector<std::byte>, blob::FieldView>> Load(const std
 int RunInfo(const std::string& path, bool json) {
   auto loaded = Load(path, "info");
   if (!loaded) return kExitBadInput;
-  const blob::FieldView& v = loaded->second;
-  const std::size_t size = loaded->first.size();
+  const blob::FieldView& v = loaded->view();
+  const std::size_t size = v.blob_size;
+  const blob::BrickAccessor* bricks = v.bricks();
   // Size figures (issue 7): stored voxels (v2: octants × 64, padding included), the blob's bytes
   // per stored voxel and against a dense float32 grid, and what zstd (level 3, as an upload would
   // send it) makes of it.
   const double nodes = static_cast<double>(v.dims[0]) * v.dims[1] * v.dims[2];
-  const double stored = v.version == blob::kVersion2 ? static_cast<double>(v.octant_count) * blob::kOctantNodes : nodes;
+  const double stored = bricks != nullptr ? static_cast<double>(bricks->octant_count()) * blob::kOctantNodes : nodes;
   const double per_voxel = stored > 0 ? static_cast<double>(size) / stored : 0.0;
   const double pct_dense = 100.0 * static_cast<double>(size) / (4.0 * nodes);
   std::vector<char> packed(ZSTD_compressBound(size));
-  const std::size_t zsize = ZSTD_compress(packed.data(), packed.size(), loaded->first.data(), size, 3);
+  const std::size_t zsize = ZSTD_compress(packed.data(), packed.size(), loaded->bytes().data(), size, 3);
   const std::size_t zstd_bytes = ZSTD_isError(zsize) != 0 ? 0 : zsize;
   if (json) {
     fmt::print(
         "{{\"file\": \"{}\", \"format_version\": {}, \"band_outside\": {}, \"brick_count\": {}, \"octant_count\": {}, "
         "\"stored_voxels\": {}, \"bytes_per_stored_voxel\": {:.4f}, \"percent_of_dense_float32\": {:.3f}, "
         "\"zstd_bytes\": {}, ",
-        path, v.version, v.band_outside, v.brick_count, v.octant_count, static_cast<std::uint64_t>(stored), per_voxel,
-        pct_dense, zstd_bytes);
+        path, v.version, v.band_outside, bricks != nullptr ? bricks->brick_count() : 0,
+        bricks != nullptr ? bricks->octant_count() : 0, static_cast<std::uint64_t>(stored), per_voxel, pct_dense,
+        zstd_bytes);
     fmt::print(
         "\"dims\": [{}, {}, {}], \"origin\": [{:.17g}, {:.17g}, {:.17g}], "
         "\"voxel\": {:.17g}, \"band_voxels\": {}, \"method\": \"{}\", \"point_count\": {}, \"build_time_s\": {:.9g}, "
@@ -71,11 +72,12 @@ int RunInfo(const std::string& path, bool json) {
   fmt::print(
       "  size        {} stored voxels, {:.3f} bytes per stored voxel, {:.2f} % of dense float32, zstd {} bytes\n",
       static_cast<std::uint64_t>(stored), per_voxel, pct_dense, zstd_bytes);
-  if (v.version == blob::kVersion2)
-    fmt::print("  bricks      {} of {} slots (8³), {} octants (4³, int16 voxel/256)\n", v.brick_count,
-               static_cast<std::uint64_t>(v.brick_dims[0]) * static_cast<std::uint64_t>(v.brick_dims[1]) *
-                   static_cast<std::uint64_t>(v.brick_dims[2]),
-               v.octant_count);
+  if (bricks != nullptr)
+    fmt::print("  bricks      {} of {} slots (8³), {} octants (4³, int16 voxel/256)\n", bricks->brick_count(),
+               static_cast<std::uint64_t>(bricks->brick_dims()[0]) *
+                   static_cast<std::uint64_t>(bricks->brick_dims()[1]) *
+                   static_cast<std::uint64_t>(bricks->brick_dims()[2]),
+               bricks->octant_count());
   fmt::print("  dims        {} x {} x {} nodes\n", v.dims[0], v.dims[1], v.dims[2]);
   fmt::print("  origin      ({:.6f}, {:.6f}, {:.6f}) m\n", v.origin_m[0], v.origin_m[1], v.origin_m[2]);
   fmt::print("  voxel       {:.6f} mm\n", v.voxel_m * 1e3);
@@ -98,7 +100,7 @@ int RunExport(const std::string& path, const std::string& npy) {
   if (const int refused = CheckOutput("export", npy, {path}); refused != kExitOk) return refused;
   auto loaded = Load(path, "export");
   if (!loaded) return kExitBadInput;
-  const blob::FieldView& v = loaded->second;
+  const blob::FieldView& v = loaded->view();
   // NPY format 1.0: magic, version, little-endian header length, a Python dict literal padded
   // with spaces to a multiple of 64 bytes and ended by '\n', then the raw C-order data.
   std::string header = fmt::format("{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}", v.dims[0],

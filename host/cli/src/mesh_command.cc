@@ -27,17 +27,20 @@ int RunMesh(const MeshArgs& args) {
     fmt::print(stderr, "palpa mesh: {}: unknown extension '{}'; use .ply or .obj\n", args.output, ext);
     return kExitBadInput;
   }
-  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 meshed in place
-  if (!field) {
-    fmt::print(stderr, "palpa mesh: {}\n", field.error().message);
-    return kExitBadInput;
+  // The blob is released once meshed: not beside the output and the closedness check.
+  std::expected<mesh::TriangleMesh, mesh::Error> surface;
+  {
+    auto field = mesh::LoadField(args.field);  // v2 meshed in place
+    if (!field) {
+      fmt::print(stderr, "palpa mesh: {}\n", field.error().message);
+      return kExitBadInput;
+    }
+    surface = mesh::ExtractZeroSurface(field->view());
   }
-  auto surface = mesh::ExtractZeroSurface(field->view);
   if (!surface) {
     fmt::print(stderr, "palpa mesh: {}: {}\n", args.field, surface.error().message);
     return kExitBadInput;
   }
-  *field = {};  // the blob is not read again: not beside the output and the closedness check
   std::expected<void, std::string> written;
   if (ext == ".ply") {
     // Streamed: the output is never whole in memory (issue 21).

@@ -10,13 +10,13 @@ namespace palpa::cli {
 
 int RunSlice(const SliceArgs& args) {
   if (const int refused = CheckOutput("slice", args.output, {args.field}); refused != kExitOk) return refused;
-  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 read in place
+  auto field = mesh::LoadField(args.field);  // v2 read in place
   if (!field) {
     fmt::print(stderr, "palpa slice: {}\n", field.error().message);
     return kExitBadInput;
   }
   const int axis = args.axis - 'x';
-  auto image = mesh::RenderSlice(field->view, axis, args.at_m, args.pixels_per_voxel);
+  auto image = mesh::RenderSlice(field->view(), axis, args.at_m, args.pixels_per_voxel);
   if (!image) {
     fmt::print(stderr, "palpa slice: {}: {}\n", args.field, image.error().message);
     return kExitBadInput;

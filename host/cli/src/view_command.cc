@@ -53,13 +53,13 @@ int RunView(const ViewArgs& args) {
   }
   view::ViewContent content;
   content.field_path = args.field;
-  auto field = mesh::LoadField(args.field, blob::Load::kAsStored);  // v2 read in place
+  auto field = mesh::LoadField(args.field);  // v2 read in place
   if (!field) {
     fmt::print(stderr, "palpa view: {}\n", field.error().message);
     return kExitBadInput;
   }
-  content.field = std::move(*field);
-  auto surface = mesh::ExtractZeroSurface(content.field.view);
+  content.field.emplace(std::move(*field));
+  auto surface = mesh::ExtractZeroSurface(content.field->view());
   if (!surface) {
     fmt::print(stderr, "palpa view: {}: {}\n", args.field, surface.error().message);
     return kExitBadInput;

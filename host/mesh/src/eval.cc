@@ -341,10 +341,11 @@ std::expected<EvalResult, Error> Evaluate(const blob::FieldView& field, const Tr
   return Score(
       [&](std::size_t n) {
         // v1 in its dense payload; v2 read in place, node by node.
-        const std::int32_t q = field.phi != nullptr ? field.phi[n]
-                                                    : field.NodeQ16(static_cast<std::int32_t>(n / (sny * snz)),
-                                                                    static_cast<std::int32_t>((n / snz) % sny),
-                                                                    static_cast<std::int32_t>(n % snz));
+        const blob::DenseAccessor* dense = field.dense();
+        const std::int32_t q = dense != nullptr ? dense->data()[n]
+                                                : field.NodeQ16(static_cast<std::int32_t>(n / (sny * snz)),
+                                                                static_cast<std::int32_t>((n / snz) % sny),
+                                                                static_cast<std::int32_t>(n % snz));
         return static_cast<double>(q) / 65536.0;
       },
       truth, options);

@@ -114,7 +114,7 @@ void Append(std::vector<std::byte>& out, const T& value) {
 }
 
 std::string InfoJson(const ViewContent& c) {
-  const blob::FieldView& f = c.field.view;
+  const blob::FieldView& f = c.field->view();
   Json j;
   j["field"] = c.field_path;
   j["dims"] = f.dims;
@@ -123,9 +123,9 @@ std::string InfoJson(const ViewContent& c) {
   j["band_voxels"] = std::max(f.band_voxels, f.band_outside);  // the dense equivalent's (docs/blob-format.md)
   j["method"] = MethodName(f.method);
   j["point_count"] = f.point_count;
-  // The file's, as palpad reports them for the field it renders (not the dense copy's of a v2 blob).
-  j["crc32c"] = fmt::format("{:08x}", c.field.file_crc32c);
-  j["blob_bytes"] = c.field.file_bytes;
+  // The file's, as palpad reports them for the field it renders.
+  j["crc32c"] = fmt::format("{:08x}", f.crc32c);
+  j["blob_bytes"] = f.blob_size;
   // The bounding box as the page will see it: of the float32 positions /api/mesh sends.
   std::array<float, 3> lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
                           std::numeric_limits<float>::infinity()};
@@ -198,7 +198,7 @@ struct ViewServer::Impl {
     if (at.empty() || ec != std::errc{} || ptr != at.data() + at.size() || !std::isfinite(at_m))
       return Text(res, 400, fmt::format("at must be a coordinate in metres, got '{}'", at.substr(0, 32)));
     std::lock_guard lock(slice_mutex);
-    auto image = mesh::RenderSlice(content.field.view, axis[0] - 'x', at_m, 0);
+    auto image = mesh::RenderSlice(content.field->view(), axis[0] - 'x', at_m, 0);
     if (!image) return Text(res, 400, image.error().message);
     // The panel only: the page lays it on the plane itself, with its own colour bar.
     mesh::SliceImage panel = *image;

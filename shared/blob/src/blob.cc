@@ -8,6 +8,25 @@
 #include <limits>
 
 namespace palpa::blob {
+
+// The one maker of verified views, accessors and owned fields (their constructors are private).
+struct detail::Verifier {
+  static FieldView View(const FieldView::Meta& m, std::variant<DenseAccessor, BrickAccessor> storage) {
+    return FieldView(m, storage);
+  }
+  static DenseAccessor Dense(const std::int32_t* phi, std::array<std::int32_t, 3> dims) {
+    return DenseAccessor(phi, dims);
+  }
+  static BrickAccessor Bricks(const std::uint32_t* index, const std::uint32_t* tables, const std::int16_t* octants,
+                              std::array<std::int32_t, 3> dims, std::array<std::int32_t, 3> brick_dims,
+                              std::uint32_t brick_count, std::uint32_t octant_count) {
+    return BrickAccessor(index, tables, octants, dims, brick_dims, brick_count, octant_count);
+  }
+  static VerifiedField Owned(std::vector<std::byte> bytes, const FieldView& view) {
+    return VerifiedField(std::move(bytes), view);
+  }
+};
+
 namespace {
 
 constexpr std::array<std::uint32_t, 256> MakeCrcTable() {
@@ -40,6 +59,24 @@ std::unexpected<BlobError> Fail(const char* field, std::size_t offset, const cha
 
 bool Finite3(const std::array<double, 3>& v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+// The metadata both versions store alike (the bands are read by each version's verifier).
+template <typename Header>
+FieldView::Meta CommonMeta(const Header& h, std::size_t size) {
+  FieldView::Meta m{};
+  m.version = h.version;
+  m.blob_size = size;
+  for (std::size_t a = 0; a < 3; ++a) m.dims[a] = static_cast<std::int32_t>(h.dims[a]);
+  m.origin_m = h.origin_m;
+  m.voxel_m = h.voxel_m;
+  m.method = static_cast<Method>(h.method);
+  m.point_count = h.point_count;
+  m.build_time_ns = h.build_time_ns;
+  m.fit_scale = h.fit_scale;
+  m.fit_offset_m = h.fit_offset_m;
+  m.crc32c = h.crc32c;
+  return m;
 }
 
 std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob);
@@ -172,22 +209,10 @@ std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob) {
                   static_cast<double>(phi[n]) / 65536.0, h.band_voxels);
   }
 
-  FieldView v;
-  v.phi = phi;
-  for (std::size_t a = 0; a < 3; ++a) v.dims[a] = static_cast<std::int32_t>(h.dims[a]);
-  v.origin_m = h.origin_m;
-  v.voxel_m = h.voxel_m;
-  v.band_voxels = static_cast<std::int32_t>(h.band_voxels);
-  v.method = static_cast<Method>(h.method);
-  v.point_count = h.point_count;
-  v.build_time_ns = h.build_time_ns;
-  v.fit_scale = h.fit_scale;
-  v.fit_offset_m = h.fit_offset_m;
-  v.crc32c = h.crc32c;
-  v.band_outside = v.band_voxels;
-  v.version = kVersion;
-  v.blob_size = size;
-  return v;
+  FieldView::Meta m = CommonMeta(h, size);
+  m.band_voxels = static_cast<std::int32_t>(h.band_voxels);
+  m.band_outside = m.band_voxels;
+  return detail::Verifier::View(m, detail::Verifier::Dense(phi, m.dims));
 }
 
 std::vector<std::byte> Encode(const BlobMeta& meta, std::span<const std::int32_t> phi) {
@@ -214,6 +239,13 @@ std::vector<std::byte> Encode(const BlobMeta& meta, std::span<const std::int32_t
   crc = Crc32c(bytes.subspan(kHeaderSize), crc);
   std::memcpy(out.data() + kCrcOffset, &crc, sizeof crc);
   return out;
+}
+
+std::expected<VerifiedField, BlobError> VerifyOwned(std::vector<std::byte> blob) {
+  auto view = Verify(blob);
+  if (!view) return std::unexpected(view.error());
+  // The buffer moves into the field with its address: the view's pointers stay valid.
+  return detail::Verifier::Owned(std::move(blob), *view);
 }
 
 std::vector<std::byte> DenseV1(const FieldView& v2) {
@@ -365,29 +397,13 @@ std::expected<FieldView, BlobError> VerifyV2(std::span<const std::byte> blob) {
     return Fail("octant_count", offsetof(HeaderV2, octant_count), "%u, but the tables reference %u octants",
                 h.octant_count, next_octant);
 
-  FieldView v;
-  v.brick_index = index;
-  v.brick_tables = table;
-  v.octants = octants;
-  for (std::size_t a = 0; a < 3; ++a) {
-    v.dims[a] = static_cast<std::int32_t>(h.dims[a]);
-    v.brick_dims[a] = static_cast<std::int32_t>(h.brick_dims[a]);
-  }
-  v.brick_count = h.brick_count;
-  v.octant_count = h.octant_count;
-  v.origin_m = h.origin_m;
-  v.voxel_m = h.voxel_m;
-  v.band_voxels = static_cast<std::int32_t>(h.band_inside);
-  v.band_outside = static_cast<std::int32_t>(h.band_outside);
-  v.method = static_cast<Method>(h.method);
-  v.point_count = h.point_count;
-  v.build_time_ns = h.build_time_ns;
-  v.fit_scale = h.fit_scale;
-  v.fit_offset_m = h.fit_offset_m;
-  v.crc32c = h.crc32c;
-  v.version = kVersion2;
-  v.blob_size = size;
-  return v;
+  FieldView::Meta m = CommonMeta(h, size);
+  m.band_voxels = static_cast<std::int32_t>(h.band_inside);
+  m.band_outside = static_cast<std::int32_t>(h.band_outside);
+  std::array<std::int32_t, 3> brick_dims{};
+  for (std::size_t a = 0; a < 3; ++a) brick_dims[a] = static_cast<std::int32_t>(h.brick_dims[a]);
+  return detail::Verifier::View(
+      m, detail::Verifier::Bricks(index, table, octants, m.dims, brick_dims, h.brick_count, h.octant_count));
 }
 
 // Squared lower bound, voxels², of the distance between the cells touching two bricks |d| slots

@@ -31,4 +31,10 @@ std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load
   return DenseV1(*view);
 }
 
+std::expected<VerifiedField, BlobError> LoadFile(const char* path) {
+  auto bytes = ReadFile(path, Load::kAsStored);
+  if (!bytes) return std::unexpected(bytes.error());
+  return VerifyOwned(std::move(*bytes));
+}
+
 }  // namespace palpa::blob

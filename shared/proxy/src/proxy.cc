@@ -97,7 +97,8 @@ bool Certified(std::int64_t phi_a, std::int64_t phi_b, const Vec& d, const Lipsc
 }
 
 // Whether every coordinate of h lies within the grid ± kHipMarginQ16 (one unsigned compare each).
-bool InHipBox(GridPos h, const sampler::TrilinearSampler& field) {
+template <typename Field>
+bool InHipBox(GridPos h, const Field& field) {
   const auto in = [&](std::int32_t v, std::size_t a) {
     return static_cast<std::uint32_t>(v) + static_cast<std::uint32_t>(kHipMarginQ16) <=
            field.last_node(a) + 2u * kHipMarginQ16;
@@ -106,7 +107,8 @@ bool InHipBox(GridPos h, const sampler::TrilinearSampler& field) {
 }
 
 // The HIP clamped to the grid ± kHipMarginQ16.
-GridPos ClampHip(GridPos h, const sampler::TrilinearSampler& field) {
+template <typename Field>
+GridPos ClampHip(GridPos h, const Field& field) {
   const auto clamp = [&](std::int32_t v, std::size_t a) {
     return std::clamp<std::int64_t>(v, -std::int64_t{kHipMarginQ16}, std::int64_t{field.last_node(a)} + kHipMarginQ16);
   };
@@ -196,8 +198,9 @@ Local FromSample(const sampler::Sample& s) {
 
 // One tick's working state. The tick is a loop of steps, each taking at most one field sample;
 // the steps are separate functions so that each keeps its few values in registers.
+template <typename Field>  // sampler::DenseSampler or BrickSampler
 struct Tick {
-  const sampler::TrilinearSampler& field;
+  const Field& field;
   ProxyState& caches;  // its sampling caches only (the rest is written back at the end of the tick)
   const ProxyParams& params;
   const LipschitzBound& lb;
@@ -220,8 +223,8 @@ struct Tick {
   bool leave_blocked;  // the straight way to an outside HIP runs into the object: slide instead
 
   // Member by member (an aggregate initialisation here compiles to a block clear first).
-  Tick(const sampler::TrilinearSampler& f, ProxyState& s, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far,
-       bool is_fast, Vec proxy, const Local& local, bool have_grad, std::int64_t phi_at_hip, bool have_phi_h)
+  Tick(const Field& f, ProxyState& s, const ProxyParams& prm, Vec hip, std::int64_t d, bool is_far, bool is_fast,
+       Vec proxy, const Local& local, bool have_grad, std::int64_t phi_at_hip, bool have_phi_h)
       : field(f),
         caches(s),
         params(prm),
@@ -247,7 +250,8 @@ struct Tick {
 
 enum class Next { kContinue, kDone };
 
-Next SamplePhiAtHip(Tick& t) {
+template <typename Field>
+Next SamplePhiAtHip(Tick<Field>& t) {
   t.phi_h = t.field.Phi(static_cast<std::int32_t>(t.h[0]), static_cast<std::int32_t>(t.h[1]),
                         static_cast<std::int32_t>(t.h[2]), t.caches.hip_phi_cache);
   t.phi_h_known = true;
@@ -257,7 +261,8 @@ Next SamplePhiAtHip(Tick& t) {
 
 // Free motion (φ(X_p) above the near band): jump to X_h if [X_p, X_h] is certified and X_h is
 // outside, else one sphere-tracing step of φ/Λ towards it, which cannot reach φ = 0.
-[[gnu::noinline]] Next FreeStep(Tick& t) {
+template <typename Field>
+[[gnu::noinline]] Next FreeStep(Tick<Field>& t) {
   if (!t.phi_h_known) return SamplePhiAtHip(t);
   const Vec d = Sub(t.h, t.p);
   if (t.phi_h > 0 && Certified(t.at.phi, t.phi_h, d, t.lb, t.delta)) {
@@ -297,7 +302,8 @@ Next SamplePhiAtHip(Tick& t) {
 // one). A blocked proxy is held and eq. 9's tangential slide takes over (ContactRun), wrapping it
 // round the part while the spring keeps pulling the HIP back. Steps ending in [−δ, −δ/2) are
 // taken (the way is clear; the proxy may rest there while it marches, never deeper).
-[[gnu::noinline]] Next LeaveStep(Tick& t) {
+template <typename Field>
+[[gnu::noinline]] Next LeaveStep(Tick<Field>& t) {
   const std::int64_t way = 3 * t.delta / 2;  // the floor of every march step: φ ≥ −3δ/2 along it
   while (t.samples < t.params.max_iterations) {
     const Vec d = Sub(t.h, t.p);
@@ -338,7 +344,8 @@ Next SamplePhiAtHip(Tick& t) {
 // band). Works on locals so that the loop stays in registers.
 enum class Contact { kDone, kLeave, kContinue };
 
-[[gnu::noinline]] Contact ContactRun(Tick& t) {
+template <typename Field>
+[[gnu::noinline]] Contact ContactRun(Tick<Field>& t) {
   const ProxyParams& prm = t.params;
   // Pieces are planned with the band's bound: both ends of a piece normally lie in the band (the
   // proxy starts within the near band, below band_top), and a piece is certified with it only when
@@ -533,8 +540,9 @@ constexpr std::int64_t kPhiUnknown = std::numeric_limits<std::int64_t>::min();
 // Everything but a free tick: start-up, the march towards a surface, contact, leaving. `phi_h`
 // is φ(X_h) when ProxyTick already sampled it (one sample taken), else kPhiUnknown. (Few enough
 // arguments to pass in registers, so that ProxyTick's calls are tail calls.)
-[[gnu::noinline]] TickResult SlowTick(const sampler::TrilinearSampler& field, const ProxyParams& params,
-                                      ProxyState& state, const GridPos& hip, std::int64_t phi_h) {
+template <typename Field>
+[[gnu::noinline]] TickResult SlowTick(const Field& field, const ProxyParams& params, ProxyState& state,
+                                      const GridPos& hip, std::int64_t phi_h) {
   // Clamp the HIP, and a free proxy that followed it, to the grid ± 4096 voxels: beyond, it is
   // free space (the proxy moves along its own side, never across the grid), and every difference
   // of positions below stays under 2^29.6.
@@ -664,8 +672,9 @@ namespace {
 
 // A free tick whose HIP left the ball around the proxy: sample φ(X_h), jump if certified, else
 // the general tick (which then marches, or makes contact).
-[[gnu::noinline]] TickResult FreeSampled(const sampler::TrilinearSampler& field, const ProxyParams& params,
-                                         ProxyState& state, const GridPos& h, const Vec& d) {
+template <typename Field>
+[[gnu::noinline]] TickResult FreeSampled(const Field& field, const ProxyParams& params, ProxyState& state,
+                                         const GridPos& h, const Vec& d) {
   const std::int32_t phi_h = field.Phi(h, state.hip_phi_cache);
   if (phi_h > 0 && Certified(state.phi, phi_h, d, field.lipschitz(), params.depth_tolerance_q16)) {
     state.proxy = h;
@@ -683,8 +692,10 @@ namespace {
 
 }  // namespace
 
-TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state,
-                     GridPos hip) {
+namespace {
+
+template <typename Field>
+TickResult TickOn(const Field& field, const ProxyParams& params, ProxyState& state, GridPos hip) {
   if (!(state.valid && state.seated && state.phi > params.near_q16))
     return SlowTick(field, params, state, hip, kPhiUnknown);
 
@@ -706,6 +717,16 @@ TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& 
   TickResult r;
   r.proxy = hip;
   return r;
+}
+
+}  // namespace
+
+TickResult ProxyTick(const sampler::DenseSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip) {
+  return TickOn(field, params, state, hip);
+}
+
+TickResult ProxyTick(const sampler::BrickSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip) {
+  return TickOn(field, params, state, hip);
 }
 
 std::array<fixed::Newtons, 3> SpringForce(const ProxyParams& params, GridPos proxy, GridPos hip) {

@@ -1,4 +1,5 @@
-// Reading a field blob for the tools (eval, mesh, slice): the bytes and the verified view on them.
+// Reading a field blob for the tools (eval, mesh, slice, view), and reading its nodes in place as
+// the dense grid they see.
 #pragma once
 
 #include <algorithm>
@@ -17,28 +18,10 @@
 
 namespace palpa::mesh {
 
-/// A verified blob and its view. Move-only: `view` points into `bytes`' heap buffer, which a
-/// move keeps in place and a copy would not.
-struct LoadedField {
-  std::vector<std::byte> bytes;
-  blob::FieldView view;  ///< Load::kDense: a v2 file re-encoded by blob::DenseV1; else as stored
-  /// The file as stored (what palpad loads and reports), whatever `load` made of it: its header's
-  /// CRC-32C and its size in bytes.
-  std::uint32_t file_crc32c = 0;
-  std::size_t file_bytes = 0;
-
-  LoadedField() = default;
-  LoadedField(LoadedField&&) = default;
-  LoadedField& operator=(LoadedField&&) = default;
-  LoadedField(const LoadedField&) = delete;
-  LoadedField& operator=(const LoadedField&) = delete;
-};
-
-/// blob::ReadFile (as stored) and blob::Verify, then with Load::kDense (the tools that index φ
-/// densely: mesh, slice, view) a v2 blob re-encoded by blob::DenseV1, whose symmetric band is the
-/// larger of v2's two. Errors name the file, and the blob's field and byte ("f.palpa: version at
-/// byte 8: 7 is not supported ...").
-std::expected<LoadedField, Error> LoadField(const std::string& path, blob::Load load = blob::Load::kDense);
+/// blob::LoadFile: the verified blob, used in place (v2 is never made dense: the tools read it
+/// through PhiQ16 and BlockQ16 below). Errors name the file, and the blob's field and byte
+/// ("f.palpa: version at byte 8: 7 is not supported ...").
+std::expected<blob::VerifiedField, Error> LoadField(const std::string& path);
 
 /// Position of node (i, j, k) in device metres: origin + (i, j, k)·voxel.
 inline Eigen::Vector3d NodePosition(const blob::FieldView& f, int i, int j, int k) {
@@ -68,12 +51,12 @@ inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array
                                             std::span<std::int32_t, blob::kBrickNodes> q16) {
   constexpr int kB = blob::kBrick;
   const std::int32_t band = std::max(f.band_voxels, f.band_outside) * 65536;
-  if (f.phi == nullptr) {
-    const std::size_t slot = (static_cast<std::size_t>(block[0]) * static_cast<std::size_t>(f.brick_dims[1]) +
+  if (const blob::BrickAccessor* bricks = f.bricks()) {
+    const std::size_t slot = (static_cast<std::size_t>(block[0]) * static_cast<std::size_t>(bricks->brick_dims()[1]) +
                               static_cast<std::size_t>(block[1])) *
-                                 static_cast<std::size_t>(f.brick_dims[2]) +
+                                 static_cast<std::size_t>(bricks->brick_dims()[2]) +
                              static_cast<std::size_t>(block[2]);
-    const std::uint32_t e = f.brick_index[slot];
+    const std::uint32_t e = bricks->index()[slot];
     if ((e & blob::kSlotEmpty) != 0)
       return std::clamp(std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256, -band, band);
   }
@@ -86,7 +69,7 @@ inline std::optional<std::int32_t> BlockQ16(const blob::FieldView& f, std::array
         q16[static_cast<std::size_t>((a * kB + b) * kB + c)] = v;
         uniform = uniform && v == first;
       }
-  if (uniform && f.phi != nullptr) return first;
+  if (uniform && f.dense() != nullptr) return first;
   return std::nullopt;
 }
 

@@ -37,11 +37,11 @@ namespace palpa::view {
 /// What the server shows. It owns all of it; handlers only read (the live feed is thread-safe).
 struct ViewContent {
   std::string field_path;
-  mesh::LoadedField field;
-  mesh::TriangleMesh surface;        ///< ExtractZeroSurface(field.view)
-  std::optional<TraceSeries> trace;  ///< --trace
-  std::unique_ptr<LiveFeed> live;    ///< --connect
-  std::string live_endpoint;         ///< as given to --connect (even when live is unavailable)
+  std::optional<blob::VerifiedField> field;  ///< set before the server starts
+  mesh::TriangleMesh surface;                ///< ExtractZeroSurface(field->view())
+  std::optional<TraceSeries> trace;          ///< --trace
+  std::unique_ptr<LiveFeed> live;            ///< --connect
+  std::string live_endpoint;                 ///< as given to --connect (even when live is unavailable)
 };
 
 /// The /api/mesh bytes for `surface` (layout above).

@@ -1,17 +1,9 @@
-// The signed distance field as the controller reads it, in place. Two versions (both verified and
-// sampled): v2, written by palpa build, keeps the narrow band only as sparse 8³ bricks of 4³ int16
-// octants behind a dense slot index (layout below, at HeaderV2); v1 is the dense grid:
-//
-//   byte 0                                                        144            144 + 4·nx·ny·nz
-//   +----------------------------- header (144 B) -----------------+------ payload -------------+
-//   | magic | ver | hsize | flags | dims | fmt | origin | voxel |…| crc32c | φ[nx][ny][nz] int32 |
-//   +-----------------------------------------------------------------------+--------------------+
-//
-// All fields little-endian; every byte of the header is a named field or zeroed padding. The
-// payload is φ in Q16.16 voxel units (negative inside), C order with k fastest:
-// index (i·ny + j)·nz + k, node (i,j,k) at origin + (i,j,k)·voxel. Payload starts 16-byte aligned.
-// CRC-32C (Castagnoli) covers header bytes [0, 140) followed by the whole payload.
-// docs/blob-format.md is the specification; the static_asserts and tests/shared keep the two in step.
+// The signed distance field as the controller reads it, in place: verification of an untrusted
+// blob (Verify), the verified view it gives (FieldView: metadata and the storage accessor), an
+// owning verified field (VerifiedField), and the encoders. Two versions, both verified and
+// sampled: v2, written by palpa build, keeps the narrow band only as sparse 8³ bricks of 4³ int16
+// octants; v1 is the dense grid. layout.h has the byte layout, accessor.h the storage's read
+// access; docs/blob-format.md is the specification.
 #pragma once
 
 #include <array>
@@ -19,179 +11,97 @@
 #include <cstdint>
 #include <expected>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <span>
+#include <utility>
+#include <variant>
 #include <vector>
+
+#include "palpa/blob/accessor.h"
+#include "palpa/blob/layout.h"
 
 namespace palpa::blob {
 
-inline constexpr std::array<char, 8> kMagic = {'P', 'A', 'L', 'P', 'A', 'S', 'D', 'F'};
-inline constexpr std::uint16_t kVersion = 1;
-inline constexpr std::uint16_t kHeaderSize = 144;
-inline constexpr std::uint32_t kValueFormatQ16Voxels = 1;  ///< int32 Q16.16, voxel units
-inline constexpr std::uint32_t kMaxDim = 4096;             ///< nodes per axis
-inline constexpr std::uint32_t kMaxBandVoxels = 64;
-
-/// How the field was built (palpa build --method).
-enum class Method : std::uint32_t {
-  kErosion = 1,  ///< paper §3.2 eq. 4, both sides
-  kEdt = 2,      ///< exact signed Euclidean distance transform of the packing indicator
-  kHermite = 3,  ///< sub-voxel: osculating quadrics clamped by the packed-ball bracket (default)
-};
-
-/// The method's name as `palpa build --method` spells it ("unknown" for other values).
-constexpr const char* MethodName(Method m) {
-  switch (m) {
-    case Method::kErosion:
-      return "erosion";
-    case Method::kEdt:
-      return "edt";
-    case Method::kHermite:
-      return "hermite";
+/// A verified field, read in place: its metadata, and its storage through dense() (v1) or
+/// bricks() (v2), which point into the blob's bytes; these must outlive the view (VerifiedField
+/// owns both). Only Verify makes one, so "verified" is a property of the type: the metadata are
+/// read-only (const members) and a view is replaced only whole, by another verified view (copy or
+/// assignment); a copy reads the same verified bytes. RT-safe to read.
+class FieldView {
+ public:
+  FieldView(const FieldView&) noexcept = default;
+  // Replaces the whole view (the members are const, so it is destroyed and constructed anew: well
+  // defined since C++20, [basic.life]/8, as std::optional does).
+  FieldView& operator=(const FieldView& other) noexcept {
+    if (this != &other) {
+      std::destroy_at(this);
+      std::construct_at(this, other);
+    }
+    return *this;
   }
-  return "unknown";
-}
+  ~FieldView() = default;
 
-/// The v1 header exactly as stored (little-endian target asserted in palpa/fixed/q.h).
-/// Comments: size (offset) meaning, unit, allowed range.
-struct HeaderV1 {
-  std::array<char, 8> magic;           // 8B (0)   "PALPASDF"
-  std::uint16_t version;               // 2B (8)   1
-  std::uint16_t header_size;           // 2B (10)  144
-  std::uint32_t flags;                 // 4B (12)  0; no flags defined, any set bit is rejected
-  std::array<std::uint32_t, 3> dims;   // 12B (16) nodes nx, ny, nz, each 2..4096
-  std::uint32_t value_format;          // 4B (28)  1 = int32 Q16.16 φ in voxel units
-  std::array<double, 3> origin_m;      // 24B (32) device-frame position of node (0,0,0), m, finite
-  double voxel_m;                      // 8B (56)  node spacing, m, in (0, 1)
-  std::uint32_t band_voxels;           // 4B (64)  narrow band half-width, voxels, 1..64; |φ| ≤ band
-  std::uint32_t method;                // 4B (68)  Method
-  std::uint32_t point_count;           // 4B (72)  oriented points the field was built from
-  std::uint32_t reserved0;             // 4B (76)  0
-  std::uint64_t build_time_ns;         // 8B (80)  wall time of palpa build, ns
-  double fit_scale;                    // 8B (88)  model units → metres: device = scale·model + offset, > 0
-  std::array<double, 3> fit_offset_m;  // 24B (96) m, finite
-  std::uint64_t payload_size;          // 8B (120) bytes = 4·nx·ny·nz
-  std::uint64_t reserved1;             // 8B (128) 0
-  std::uint32_t reserved2;             // 4B (136) 0
-  std::uint32_t crc32c;                // 4B (140) CRC-32C of bytes [0,140) then the payload
-};
-static_assert(sizeof(HeaderV1) == kHeaderSize);
-static_assert(alignof(HeaderV1) == 8);
-static_assert(offsetof(HeaderV1, dims) == 16 && offsetof(HeaderV1, value_format) == 28);
-static_assert(offsetof(HeaderV1, origin_m) == 32 && offsetof(HeaderV1, voxel_m) == 56);
-static_assert(offsetof(HeaderV1, band_voxels) == 64 && offsetof(HeaderV1, build_time_ns) == 80);
-static_assert(offsetof(HeaderV1, fit_scale) == 88 && offsetof(HeaderV1, fit_offset_m) == 96);
-static_assert(offsetof(HeaderV1, payload_size) == 120 && offsetof(HeaderV1, crc32c) == 140);
-inline constexpr std::size_t kCrcOffset = offsetof(HeaderV1, crc32c);
+  const std::uint16_t version;               ///< kVersion (1) or kVersion2 (2)
+  const std::size_t blob_size;               ///< bytes of the verified blob
+  const std::array<std::int32_t, 3> dims;    ///< nodes nx, ny, nz, each 2..kMaxDim
+  const std::array<double, 3> origin_m;      ///< device-frame position of node (0,0,0), m
+  const double voxel_m;                      ///< node spacing, m
+  const std::int32_t band_voxels;            ///< v1: the band, |φ| ≤ it; v2: band_inside, φ ≥ −it
+  const std::int32_t band_outside;           ///< v2: brick φ ≤ this; v1: = band_voxels
+  const Method method;                       ///< how the field was built
+  const std::uint32_t point_count;           ///< oriented points it was built from
+  const std::uint64_t build_time_ns;         ///< wall time of palpa build, ns
+  const double fit_scale;                    ///< model units → metres (device = scale·model + offset)
+  const std::array<double, 3> fit_offset_m;  ///< m
+  const std::uint32_t crc32c;                ///< as stored (and checked)
 
-// ---- Blob v2: the narrow band as sparse 8³ bricks of 4³ int16 octants (docs/blob-format.md) ----
-//
-//   0        168          168+4·S           T+32·B    O (64-aligned)     O+128·C
-//   | header | index S×u32 | tables B×8×u32 | 0 pad   | octants C×64×int16 |
-//
-// An index or table entry with bit 31 set is uniform: φ (int16, voxel/256) in its low 16 bits.
-
-inline constexpr std::uint16_t kVersion2 = 2;
-inline constexpr std::uint16_t kHeaderSizeV2 = 168;
-inline constexpr std::uint32_t kValueFormatQ7_8Voxels = 2;  ///< int16, voxel/256 (Q7.8)
-inline constexpr int kBrickLog2 = 3;
-inline constexpr int kBrick = 1 << kBrickLog2;                                     ///< nodes per brick edge (8)
-inline constexpr int kOctant = kBrick / 2;                                         ///< nodes per octant edge (4)
-inline constexpr int kOctantNodes = kOctant * kOctant * kOctant;                   ///< 64
-inline constexpr std::size_t kBrickNodes = std::size_t{kBrick} * kBrick * kBrick;  ///< 512
-inline constexpr std::size_t kOctantBytes = 2 * kOctantNodes;                      ///< 128
-inline constexpr std::size_t kTableBytes = 8 * 4;                                  ///< a brick's octant table
-inline constexpr std::size_t kOctantAlign = 64;                                    ///< octants start on a cache line
-inline constexpr std::uint32_t kSlotEmpty = 0x80000000U;  ///< entry flag: uniform, φ in the low 16 bits
-inline constexpr int kQ7_8ToQ16 = 8;                      ///< stored · 256 = Q16.16
-
-/// The v2 header exactly as stored. Comments: size (offset) meaning, unit, allowed range.
-struct HeaderV2 {
-  std::array<char, 8> magic;                // 8B (0)    "PALPASDF"
-  std::uint16_t version;                    // 2B (8)    2
-  std::uint16_t header_size;                // 2B (10)   168
-  std::uint32_t flags;                      // 4B (12)   0
-  std::array<std::uint32_t, 3> dims;        // 12B (16)  nodes nx, ny, nz, each 2..4096
-  std::uint32_t value_format;               // 4B (28)   2 = int16 Q7.8 φ in voxel units
-  std::array<double, 3> origin_m;           // 24B (32)  m, finite
-  double voxel_m;                           // 8B (56)   m, in (0, 1)
-  std::uint32_t band_inside;                // 4B (64)   voxels, 1..64; stored φ ≥ −band_inside
-  std::uint32_t band_outside;               // 4B (68)   voxels, 1..64; brick φ ≤ +band_outside
-  std::uint32_t method;                     // 4B (72)   Method
-  std::uint32_t point_count;                // 4B (76)   points
-  std::uint64_t build_time_ns;              // 8B (80)   ns
-  double fit_scale;                         // 8B (88)   > 0
-  std::array<double, 3> fit_offset_m;       // 24B (96)  m, finite
-  std::array<std::uint32_t, 3> brick_dims;  // 12B (120) ⌈dims/8⌉ per axis
-  std::uint32_t brick_count;                // 4B (132)  stored bricks (octant tables), ≤ slots
-  std::uint32_t octant_count;               // 4B (136)  stored octants, ≤ 8·brick_count
-  std::uint32_t reserved0;                  // 4B (140)  0
-  std::uint64_t octants_offset;             // 8B (144)  align64(168 + 4·slots + 32·brick_count)
-  std::uint64_t payload_size;               // 8B (152)  octants_offset − 168 + 128·octant_count
-  std::uint32_t reserved1;                  // 4B (160)  0
-  std::uint32_t crc32c;                     // 4B (164)  CRC-32C of bytes [0,164) then [168, end)
-};
-static_assert(sizeof(HeaderV2) == kHeaderSizeV2);
-static_assert(alignof(HeaderV2) == 8);
-static_assert(offsetof(HeaderV2, dims) == 16 && offsetof(HeaderV2, value_format) == 28);
-static_assert(offsetof(HeaderV2, origin_m) == 32 && offsetof(HeaderV2, voxel_m) == 56);
-static_assert(offsetof(HeaderV2, band_inside) == 64 && offsetof(HeaderV2, band_outside) == 68);
-static_assert(offsetof(HeaderV2, method) == 72 && offsetof(HeaderV2, point_count) == 76);
-static_assert(offsetof(HeaderV2, build_time_ns) == 80 && offsetof(HeaderV2, fit_scale) == 88);
-static_assert(offsetof(HeaderV2, fit_offset_m) == 96 && offsetof(HeaderV2, brick_dims) == 120);
-static_assert(offsetof(HeaderV2, brick_count) == 132 && offsetof(HeaderV2, octant_count) == 136);
-static_assert(offsetof(HeaderV2, reserved0) == 140 && offsetof(HeaderV2, octants_offset) == 144);
-static_assert(offsetof(HeaderV2, payload_size) == 152 && offsetof(HeaderV2, reserved1) == 160);
-static_assert(offsetof(HeaderV2, crc32c) == 164);
-inline constexpr std::size_t kCrcOffsetV2 = offsetof(HeaderV2, crc32c);
-
-/// A verified field, read in place: `phi` (v1) or `brick_index`, `brick_tables` and `octants`
-/// (v2) point into the caller's blob buffer, which must outlive the view. RT-safe to read.
-struct FieldView {
-  const std::int32_t* phi = nullptr;  ///< v1: Q16.16 voxel units, (nx,ny,nz) C order; v2: null
-  /// v2: one entry per 8³ brick slot (bi·bny + bj)·bnz + bk: a brick number, or kSlotEmpty | the
-  /// slot's uniform φ as int16 Q7.8 in the low 16 bits. Null for v1.
-  const std::uint32_t* brick_index = nullptr;
-  /// v2: 8 entries per stored brick, octant (ox, oy, oz) at 4·ox + 2·oy + oz: an octant number or
-  /// kSlotEmpty | uniform φ.
-  const std::uint32_t* brick_tables = nullptr;
-  const std::int16_t* octants = nullptr;  ///< v2: octant_count × 64 int16 Q7.8, local (a·4 + b)·4 + c
-  std::array<std::int32_t, 3> brick_dims{};
-  std::uint32_t brick_count = 0;
-  std::uint32_t octant_count = 0;
-  std::int32_t band_outside = 0;  ///< v2: brick φ ≤ this; v1: = band_voxels
-  std::uint16_t version = kVersion;
-  std::size_t blob_size = 0;  ///< bytes of the verified blob
-  std::array<std::int32_t, 3> dims{};
-  std::array<double, 3> origin_m{};
-  double voxel_m = 0;
-  std::int32_t band_voxels = 0;  ///< v1: the band; v2: band_inside (stored φ ≥ −band_voxels)
-  Method method = Method::kErosion;
-  std::uint32_t point_count = 0;
-  std::uint64_t build_time_ns = 0;
-  double fit_scale = 1;
-  std::array<double, 3> fit_offset_m{};
-  std::uint32_t crc32c = 0;
+  /// v1's storage, or null for v2.
+  const DenseAccessor* dense() const { return std::get_if<DenseAccessor>(&storage_); }
+  /// v2's storage, or null for v1.
+  const BrickAccessor* bricks() const { return std::get_if<BrickAccessor>(&storage_); }
 
   /// φ at node (i, j, k), Q16.16 voxels, for either version (non-RT helpers and tests; the
-  /// sampler has its own stencil fetch). Indices must be inside the grid.
+  /// sampler fetches whole stencils through the accessor). Indices must be inside the grid.
   std::int32_t NodeQ16(std::int32_t i, std::int32_t j, std::int32_t k) const {
-    if (phi != nullptr)
-      return phi[(static_cast<std::size_t>(i) * static_cast<std::size_t>(dims[1]) + static_cast<std::size_t>(j)) *
-                     static_cast<std::size_t>(dims[2]) +
-                 static_cast<std::size_t>(k)];
-    const std::size_t slot = (static_cast<std::size_t>(i >> 3) * static_cast<std::size_t>(brick_dims[1]) +
-                              static_cast<std::size_t>(j >> 3)) *
-                                 static_cast<std::size_t>(brick_dims[2]) +
-                             static_cast<std::size_t>(k >> 3);
-    std::uint32_t e = brick_index[slot];
-    if ((e & kSlotEmpty) == 0)
-      e = brick_tables[8 * static_cast<std::size_t>(e) +
-                       static_cast<std::size_t>(((i >> 2) & 1) * 4 + ((j >> 2) & 1) * 2 + ((k >> 2) & 1))];
-    if ((e & kSlotEmpty) != 0) return std::int32_t{static_cast<std::int16_t>(e & 0xFFFFU)} * 256;
-    const auto local = static_cast<std::size_t>(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
-    return std::int32_t{octants[static_cast<std::size_t>(e) * kOctantNodes + local]} * 256;
+    if (const DenseAccessor* d = dense()) return d->NodeQ16(i, j, k);
+    return std::get_if<BrickAccessor>(&storage_)->NodeQ16(i, j, k);
   }
+
+  /// The metadata as Verify reads them (a plain record; only Verify turns one into a view).
+  struct Meta {
+    std::uint16_t version;
+    std::size_t blob_size;
+    std::array<std::int32_t, 3> dims;
+    std::array<double, 3> origin_m;
+    double voxel_m;
+    std::int32_t band_voxels, band_outside;
+    Method method;
+    std::uint32_t point_count;
+    std::uint64_t build_time_ns;
+    double fit_scale;
+    std::array<double, 3> fit_offset_m;
+    std::uint32_t crc32c;
+  };
+
+ private:
+  friend struct detail::Verifier;
+  FieldView(const Meta& m, std::variant<DenseAccessor, BrickAccessor> storage)
+      : version(m.version),
+        blob_size(m.blob_size),
+        dims(m.dims),
+        origin_m(m.origin_m),
+        voxel_m(m.voxel_m),
+        band_voxels(m.band_voxels),
+        band_outside(m.band_outside),
+        method(m.method),
+        point_count(m.point_count),
+        build_time_ns(m.build_time_ns),
+        fit_scale(m.fit_scale),
+        fit_offset_m(m.fit_offset_m),
+        crc32c(m.crc32c),
+        storage_(storage) {}
+  std::variant<DenseAccessor, BrickAccessor> storage_;
 };
 
 /// Why a blob was refused: the field, its byte offset and a readable sentence (no allocation).
@@ -212,6 +122,32 @@ std::uint32_t Crc32c(std::span<const std::byte> data, std::uint32_t crc = 0);
 /// `blob.data()` must be 4-byte aligned. Errors name the field and byte offset, e.g.
 /// "version at byte 8: 7 is not supported (this build reads v1)".
 [[nodiscard]] std::expected<FieldView, BlobError> Verify(std::span<const std::byte> blob);
+
+/// A verified blob that owns its bytes: the bytes and the FieldView over them, moved together (a
+/// moved std::vector keeps its buffer, so the view stays valid). Only VerifyOwned and LoadFile make
+/// one. What the host tools, palpa hil, the benches and the tests hold; palpad verifies into
+/// buffers it preallocated, with Verify. Non-RT to make, RT-safe to read.
+class VerifiedField {
+ public:
+  const FieldView& view() const { return view_; }
+  std::span<const std::byte> bytes() const { return bytes_; }
+
+  VerifiedField(VerifiedField&&) noexcept = default;
+  VerifiedField(const VerifiedField&) = delete;
+  VerifiedField& operator=(const VerifiedField&) = delete;
+  VerifiedField& operator=(VerifiedField&&) noexcept = default;  // the buffer moves with its address too
+  ~VerifiedField() = default;
+
+ private:
+  friend struct detail::Verifier;
+  VerifiedField(std::vector<std::byte> bytes, const FieldView& view) : bytes_(std::move(bytes)), view_(view) {}
+  std::vector<std::byte> bytes_;
+  FieldView view_;
+};
+
+/// Verify, keeping the bytes (4-byte aligned, as any std::vector<std::byte> of ours is: the
+/// allocator aligns to 16). Same errors as Verify.
+[[nodiscard]] std::expected<VerifiedField, BlobError> VerifyOwned(std::vector<std::byte> blob);
 
 /// The non-payload fields of a blob to encode.
 struct BlobMeta {
@@ -285,5 +221,10 @@ inline constexpr std::uint64_t kMaxFileBytes =
 /// kMaxFileBytes is read (io::ReadBounded: a FIFO or device is refused at once). Errors name the
 /// file; with Load::kDense also the v2 blob's field and byte.
 [[nodiscard]] std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load = Load::kDense);
+
+/// ReadFile as stored, then VerifyOwned: the verified blob file, read once and used in place (no
+/// dense copy of a v2 blob). Errors as ReadFile's and Verify's (the caller names the file in the
+/// latter). Non-RT.
+[[nodiscard]] std::expected<VerifiedField, BlobError> LoadFile(const char* path);
 
 }  // namespace palpa::blob

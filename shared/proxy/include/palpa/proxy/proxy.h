@@ -159,7 +159,14 @@ struct TickResult {
 /// fade); direction kept. With the HIP inside, the proxy never leaves the near band (no drop).
 /// docs/realtime-core.md § Hold, release and overpower policy. A proxy started inside the object
 /// follows the HIP with zero force until the HIP has been outside once.
-TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+/// One instantiation per storage (no storage branch inside the tick); the TrilinearSampler overload
+/// picks one with a single branch at the top of the tick.
+TickResult ProxyTick(const sampler::DenseSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+TickResult ProxyTick(const sampler::BrickSampler& field, const ProxyParams& params, ProxyState& state, GridPos hip);
+inline TickResult ProxyTick(const sampler::TrilinearSampler& field, const ProxyParams& params, ProxyState& state,
+                            GridPos hip) {
+  return field.Visit([&](const auto& typed) { return ProxyTick(typed, params, state, hip); });
+}
 
 /// Eq. 10 alone: f = k·h·(proxy − hip), its magnitude clamped to max_force with its direction kept.
 /// Components (Q16.16 N) are rounded towards zero and |u| up, so Σ f_i² ≤ max_force² holds exactly
