@@ -85,8 +85,14 @@ std::expected<std::vector<Tick>, std::string> DecodeTicks(std::string_view gz, s
     rc = inflate(&z, Z_NO_FLUSH);
     raw.append(buf, sizeof buf - z.avail_out);
   }
+  // zlib stops where it finds the damage (a bad header, code or check value) or where the input
+  // runs out: that byte, with its reason, is what a person looking at the file needs.
+  const std::string reason = z.msg != nullptr ? z.msg : "truncated";
+  const uLong stopped_at = z.total_in;
   inflateEnd(&z);
-  if (rc != Z_STREAM_END) return std::unexpected("corrupt golden tick stream (gzip)");
+  if (rc != Z_STREAM_END)
+    return std::unexpected(
+        fmt::format("corrupt golden tick stream (gzip) at byte {} of {}: {}", stopped_at, gz.size(), reason));
   std::vector<Tick> ticks;
   std::array<std::int64_t, 3> prev{};
   std::size_t at = 0;
@@ -99,17 +105,22 @@ std::expected<std::vector<Tick>, std::string> DecodeTicks(std::string_view gz, s
     }
     return false;
   };
+  const auto early = [&](std::size_t tick) {
+    return std::unexpected(
+        fmt::format("golden tick stream ends early: tick {} of {} needs byte {} of {} (uncompressed)", tick, count, at,
+                    raw.size()));
+  };
   for (std::size_t i = 0; i < count; ++i) {
     Tick t;
     for (std::size_t k = 0; k < 3; ++k) {
       std::uint64_t u = 0;
-      if (!varint(u)) return std::unexpected("golden tick stream ends early");
+      if (!varint(u)) return early(i);
       const auto d = static_cast<std::int64_t>(u >> 1) ^ -static_cast<std::int64_t>(u & 1);
       prev[k] += d;
       t.force_q24[k] = static_cast<std::int32_t>(prev[k]);
       t.force[k] = static_cast<double>(prev[k]) / kForceScale;
     }
-    if (at + 4 > raw.size()) return std::unexpected("golden tick stream ends early");
+    if (at + 4 > raw.size()) return early(i);
     t.contact = raw[at] != 0;
     t.flags = static_cast<std::uint8_t>(raw[at + 1]);
     t.row_hash = static_cast<std::uint16_t>(static_cast<std::uint8_t>(raw[at + 2]) |
@@ -202,8 +213,9 @@ std::string Differences(const fs::path& dir, const std::string& name, const Gold
   if (g.device_report != r.device_report)
     out += fmt::format("    device report:\n      now:    {}\n      golden: {}\n", Replace(r.device_report, "\n", " "),
                        Replace(g.device_report, "\n", " "));
-  auto gt = DecodeTicks(detail::Slurp(GoldenTicksPath(dir, name)), g.ticks);
-  if (!gt) return out + "    " + gt.error() + "\n";
+  const fs::path ticks_path = GoldenTicksPath(dir, name);
+  auto gt = DecodeTicks(detail::Slurp(ticks_path), g.ticks);
+  if (!gt) return out + "    " + ticks_path.string() + ": " + gt.error() + "\n";
   std::size_t changed = 0, force_changed = 0, first = SIZE_MAX;
   double max_df = 0;
   std::size_t max_df_tick = 0;

@@ -30,8 +30,10 @@ namespace palpa::hil {
 /// RawTicks gzip-compressed (level 9, mtime 0: the same ticks give the same bytes): NAME.ticks.gz.
 [[nodiscard]] std::string EncodeTicks(const std::vector<Tick>& ticks);
 /// The first `count` ticks of an EncodeTicks stream: forces (force_q24 and newtons), contact,
-/// flags and row hashes; t_s, HIP and proxy are not stored (0). Error: "corrupt golden tick
-/// stream (gzip)" or "golden tick stream ends early".
+/// flags and row hashes; t_s, HIP and proxy are not stored (0). Error: names the byte, "corrupt
+/// golden tick stream (gzip) at byte N of SIZE: zlib's reason" (N where zlib stopped: at or after
+/// the damage) or "golden tick stream ends early: tick I of COUNT needs byte B of SIZE
+/// (uncompressed)".
 [[nodiscard]] std::expected<std::vector<Tick>, std::string> DecodeTicks(std::string_view gz, std::size_t count);
 
 /// palpad's summary JSON reduced to its deterministic counters (ticks, contact_ticks,
