@@ -28,8 +28,8 @@
 
 #include "atomic_file.h"
 #include "commands.h"
-#include "field_sampler.h"
 #include "palpa/blob/blob.h"
+#include "palpa/mesh/field_sampler.h"
 #include "palpa/trace/trace.h"
 
 namespace palpa::cli {
@@ -94,7 +94,7 @@ struct Touch {
 
 class Synth {
  public:
-  Synth(const TraceSynthArgs& a, const FieldSampler& field)
+  Synth(const TraceSynthArgs& a, const mesh::FieldSampler& field)
       : a_(a), field_(field), rng_(a.seed), t_(a.rate_hz), lo_(field.GridMin()), hi_(field.GridMax()) {
     centre_ = 0.5 * (lo_ + hi_);
     diagonal_ = (hi_ - lo_).norm();
@@ -559,7 +559,7 @@ class Synth {
   }
 
   const TraceSynthArgs& a_;
-  const FieldSampler& field_;
+  const mesh::FieldSampler& field_;
   std::mt19937 rng_;
   TraceBuilder t_;
   Vector3d lo_, hi_, centre_;
@@ -580,7 +580,7 @@ int RunTraceSynth(const TraceSynthArgs& a) {
     fmt::print(stderr, "palpa trace synth: {}: {}\n", a.field, view.error().what());
     return kExitBadInput;
   }
-  const FieldSampler field(*view);
+  const mesh::FieldSampler field(*view);
   Synth synth(a, field);
   std::string note;
   if (auto e = synth.Run(note)) {

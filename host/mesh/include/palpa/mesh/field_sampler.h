@@ -7,7 +7,7 @@
 
 #include "palpa/blob/blob.h"
 
-namespace palpa::cli {
+namespace palpa::mesh {
 
 class FieldSampler {
  public:
@@ -33,4 +33,4 @@ class FieldSampler {
   blob::FieldView f_;
 };
 
-}  // namespace palpa::cli
+}  // namespace palpa::mesh

@@ -1,11 +1,11 @@
-#include "field_sampler.h"
+#include "palpa/mesh/field_sampler.h"
 
 #include "palpa/mesh/field_file.h"
 
 #include <algorithm>
 #include <cmath>
 
-namespace palpa::cli {
+namespace palpa::mesh {
 
 double FieldSampler::Phi(const Eigen::Vector3d& x_m) const {
   double g[3];
@@ -78,4 +78,4 @@ Eigen::Vector3d FieldSampler::GridMax() const {
           f_.origin_m[2] + (f_.dims[2] - 1) * f_.voxel_m};
 }
 
-}  // namespace palpa::cli
+}  // namespace palpa::mesh
