@@ -167,10 +167,18 @@ struct Float64Params {
   double gamma, beta, delta, near, tolerance, k, max_force, mu_s, mu_d;
   int max_iterations, gradient_samples, settle_samples;
   static Float64Params Of(const proxy::ProxyParams& p) {
-    const auto d = [](std::int32_t q) { return q / 65536.0; };
-    return {d(p.gamma_q16),      d(p.beta_q16),        d(p.depth_tolerance_q16),     d(p.near_q16),
-            d(p.tolerance_q16),  p.k.value.ToDouble(), p.max_force.value.ToDouble(), d(p.mu_static_q16),
-            d(p.mu_dynamic_q16), p.max_iterations,     p.gradient_samples,           p.settle_samples};
+    return {p.gamma.ToDouble(),
+            p.beta.ToDouble(),
+            p.depth_tolerance.value.ToDouble(),
+            p.near.value.ToDouble(),
+            p.tolerance.value.ToDouble(),
+            p.k.value.ToDouble(),
+            p.max_force.value.ToDouble(),
+            p.mu_static.ToDouble(),
+            p.mu_dynamic.ToDouble(),
+            p.max_iterations,
+            p.gradient_samples,
+            p.settle_samples};
   }
 };
 
@@ -180,7 +188,7 @@ struct Float64State {
   Vec3d grad{};
   Vec3d last_hip{};
   bool grad_valid = false, seated = false, valid = false;
-  double pull = 0;               // last tick's |f| bound, N (proxy::ProxyState::pull_q16)
+  double pull = 0;               // last tick's |f| bound, N (proxy::ProxyState::pull)
   double hip_phi_bound = 1e300;  // an upper bound of φ(last_hip), voxels (none: 1e300)
 };
 
@@ -197,9 +205,10 @@ inline Float64State ToFloat64(const proxy::ProxyState& s) {
   f.grad_valid = s.grad_valid;
   f.seated = s.seated;
   f.valid = s.valid;
-  f.pull = s.pull_q16 / 65536.0;
-  f.hip_phi_bound =
-      s.hip_phi_bound_q16 == std::numeric_limits<std::int32_t>::max() ? 1e300 : s.hip_phi_bound_q16 / 65536.0;
+  f.pull = s.pull.value.ToDouble();
+  f.hip_phi_bound = s.hip_phi_bound.value.raw() == std::numeric_limits<std::int32_t>::max()
+                        ? 1e300
+                        : s.hip_phi_bound.value.ToDouble();
   return f;
 }
 

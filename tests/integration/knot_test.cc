@@ -187,7 +187,7 @@ TEST(Knot, FieldIsThinAndRepresentsTheMesh) {
 
 TEST(Knot, HipDrivenThroughIsNeverTunnelled) {
   const Knot& k = GetKnot();
-  const double params_depth_tolerance = proxy::MakeProxyParams({}, kVoxel).value().depth_tolerance_q16 / 65536.0;
+  const double params_depth_tolerance = proxy::MakeProxyParams({}, kVoxel).value().depth_tolerance.value.ToDouble();
   for (const double speed : {0.5, 2.0}) {
     const PassStats s = Drive(k, speed, 10000, speed > 1 ? 2 : 1);
     std::printf(

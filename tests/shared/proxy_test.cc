@@ -508,7 +508,7 @@ std::uint64_t TickHash(std::uint64_t h, const TickResult& r) {
                                 r.force[0].value.raw(),
                                 r.force[1].value.raw(),
                                 r.force[2].value.raw(),
-                                r.penetration_q16,
+                                r.penetration.value.raw(),
                                 r.contact,
                                 r.clamped,
                                 r.converged,

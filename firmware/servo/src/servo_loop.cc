@@ -33,7 +33,7 @@ bool SeedProxy(const ServoField& f, sampler::GridPos hip, proxy::ProxyState& sta
     const std::int64_t g2 =
         std::int64_t{s.grad[0]} * s.grad[0] + std::int64_t{s.grad[1]} * s.grad[1] + std::int64_t{s.grad[2]} * s.grad[2];
     if (g2 < kMinGrad2) return false;
-    if (s.phi >= 0 && s.phi <= f.params.near_q16) {
+    if (s.phi >= 0 && s.phi <= f.params.near.value.raw()) {
       state.proxy = p;
       state.phi = s.phi;
       state.last_hip = hip;
@@ -41,7 +41,7 @@ bool SeedProxy(const ServoField& f, sampler::GridPos hip, proxy::ProxyState& sta
       state.valid = true;
       // The spring is already stretched: its force bounds last tick's (the proxy's rise limit
       // starts from it, not from 0), and the swap ramp fades the output from the old field's.
-      state.pull_q16 = proxy::SpringPullBound(f.params, p, hip);
+      state.pull = {fixed::Q16::FromRaw(proxy::SpringPullBound(f.params, p, hip))};
       return true;
     }
     // Aim a little outside (+1/64 voxel) so the last step lands at φ ≥ 0 rather than just below.
@@ -246,7 +246,7 @@ StepResult ServoLoop::Tick(std::int64_t start_ns, std::int64_t wake_latency_ns) 
     }
     if (r.contact) {
       ++counters_.contact_ticks;
-      const double penetration_m = static_cast<double>(r.penetration_q16) / 65536.0 * frame_.voxel_m;
+      const double penetration_m = r.penetration.value.ToDouble() * frame_.voxel_m;
       if (penetration_m > counters_.max_penetration_m) counters_.max_penetration_m = penetration_m;
     }
   }

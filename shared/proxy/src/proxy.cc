@@ -164,16 +164,16 @@ std::expected<ProxyParams, const char*> MakeProxyParams(const ProxyConfig& c, do
   if (!(std::isfinite(c.depth_tolerance_voxels) && c.depth_tolerance_voxels > 0 && c.depth_tolerance_voxels <= 0.5))
     return std::unexpected("depth tolerance must be in (0, 0.5] voxel");
   ProxyParams p;
-  p.gamma_q16 = fixed::Q16::FromDouble(c.gamma).raw();
-  p.beta_q16 = fixed::Q16::FromDouble(c.beta).raw();
+  p.gamma = fixed::Q16::FromDouble(c.gamma);
+  p.beta = fixed::Q16::FromDouble(c.beta);
   p.max_iterations = c.max_iterations;
   p.gradient_samples = c.gradient_samples;
   p.settle_samples = c.settle_samples;
   p.k = {fixed::Q16::FromDouble(k_per_voxel)};
   p.max_force = {fixed::Q16::FromDouble(c.max_force_n)};
-  p.mu_static_q16 = fixed::Q16::FromDouble(c.mu_static).raw();
-  p.mu_dynamic_q16 = fixed::Q16::FromDouble(c.mu_dynamic).raw();
-  p.depth_tolerance_q16 = fixed::Q16::FromDouble(c.depth_tolerance_voxels).raw();
+  p.mu_static = fixed::Q16::FromDouble(c.mu_static);
+  p.mu_dynamic = fixed::Q16::FromDouble(c.mu_dynamic);
+  p.depth_tolerance = {fixed::Q16::FromDouble(c.depth_tolerance_voxels)};
   p.voxel_m = voxel_m;
   return p;
 }
@@ -329,7 +329,7 @@ template <typename Field>
     t.p = q;
     t.at.phi = phi_q;
     t.grad_valid = false;
-    if (phi_q > t.params.near_q16) return Next::kContinue;  // off the surface: free motion next
+    if (phi_q > t.params.near.value.raw()) return Next::kContinue;  // off the surface: free motion next
   }
   if (t.samples < t.params.max_iterations) t.leave_blocked = true;
   return Next::kContinue;
@@ -378,29 +378,29 @@ template <typename Field>
       dx = d[0], dy = d[1], dz = d[2];
       dot16 = RoundShift(dx * gx + dy * gy + dz * gz, 16);
     }
-    const std::int64_t back = (RoundShift(prm.beta_q16 * at.phi, 16) * at.inv_grad2) >> 24;  // Q16
-    const std::int64_t along = (dot16 * at.inv_grad2) >> 24;                                 // Q16
+    const std::int64_t back = (RoundShift(prm.beta.raw() * at.phi, 16) * at.inv_grad2) >> 24;  // Q16
+    const std::int64_t along = (dot16 * at.inv_grad2) >> 24;                                   // Q16
     const Vec dn = {-((back * gx) >> 16), -((back * gy) >> 16), -((back * gz) >> 16)};
     Vec dt = {dx - ((along * gx) >> 16), dy - ((along * gy) >> 16), dz - ((along * gz) >> 16)};  // |dt_i| ≤ √3·2^22
-    if (prm.gamma_q16 != (1 << 16)) {
-      for (auto& v : dt) v = RoundShift(prm.gamma_q16 * v, 16);
+    if (prm.gamma.raw() != (1 << 16)) {
+      for (auto& v : dt) v = RoundShift(prm.gamma.raw() * v, 16);
     }
-    if (prm.mu_static_q16 > 0) {
+    if (prm.mu_static.raw() > 0) {
       // Friction cone: the HIP's tangential offset from the proxy is dt, its depth below the
       // linearised surface −c/|∇φ|. Stick inside the μs cone; else slide to the μd cone's edge.
       const auto t_len = static_cast<std::int64_t>(ISqrt(Norm2(dt)));
       const auto g_len = static_cast<std::int64_t>(ISqrt(gx * gx + gy * gy + gz * gz));
       const std::int64_t depth = std::max<std::int64_t>(0, (-c << 16) / g_len);
-      if ((t_len << 16) <= prm.mu_static_q16 * depth) {
+      if ((t_len << 16) <= prm.mu_static.raw() * depth) {
         dt = {};
       } else {
-        dt = Scale(dt, t_len - RoundShift(prm.mu_dynamic_q16 * depth, 16), t_len);
+        dt = Scale(dt, t_len - RoundShift(prm.mu_dynamic.raw() * depth, 16), t_len);
       }
     }
     const std::int64_t nx = std::llabs(dn[0]), ny = std::llabs(dn[1]), nz = std::llabs(dn[2]);
     const std::int64_t tx = std::llabs(dt[0]), ty = std::llabs(dt[1]), tz = std::llabs(dt[2]);
     // Convergence test: the whole update, |Δn|₁ + |Δt|₁, within the tolerance.
-    if (nx + ny + nz + tx + ty + tz <= prm.tolerance_q16) {
+    if (nx + ny + nz + tx + ty + tz <= prm.tolerance.value.raw()) {
       t.converged = true;
       break;
     }
@@ -462,7 +462,7 @@ template <typename Field>
       const std::int64_t need = (at.phi + s.phi + 2 * way - kSlack) << 16;
       const std::int64_t piece_variation = (j == 0 ? dn_variation : 0) + (reach - reached);
       const bool in_band = at.phi <= t.band_top && s.phi <= t.band_top;
-      if (!(s.phi >= -delta / 2 && (s.phi <= prm.near_q16 || t.leave_blocked) && need >= 0 &&
+      if (!(s.phi >= -delta / 2 && (s.phi <= prm.near.value.raw() || t.leave_blocked) && need >= 0 &&
             ((in_band && piece_variation <= need) ||
              Certified(at.phi, s.phi, {qx - ex, qy - ey, qz - ez}, in_band ? t.band : t.lb, way)))) {
         break;
@@ -475,7 +475,7 @@ template <typename Field>
       } else {
         at.phi = s.phi;
       }
-      if (at.phi > prm.near_q16) {  // off the surface round a part (held only): free motion next
+      if (at.phi > prm.near.value.raw()) {  // off the surface round a part (held only): free motion next
         left = true;
         break;
       }
@@ -483,7 +483,7 @@ template <typename Field>
     if (moved) {
       // Convergence test, on the move just made: |Δ|₁ within the tolerance ends the iteration
       // (saves computing the next, smaller one).
-      const bool small = std::llabs(ex - px) + std::llabs(ey - py) + std::llabs(ez - pz) <= prm.tolerance_q16;
+      const bool small = std::llabs(ex - px) + std::llabs(ey - py) + std::llabs(ez - pz) <= prm.tolerance.value.raw();
       px = ex, py = ey, pz = ez;
       t.halvings = 0;
       if (left) {
@@ -521,12 +521,15 @@ std::int64_t CeilLength(const Vec& u) {
   r.clamped = k * len > (limit << 16);
   std::int32_t any = 0;
   for (std::size_t a = 0; a < 3; ++a) {
-    const std::int64_t f = r.clamped ? limit * u[a] / len : k * u[a] / 65536;  // towards zero
-    r.force[a] = {fixed::Q16::FromRaw(static_cast<std::int32_t>(f))};
-    any |= static_cast<std::int32_t>(f);
+    // Both towards zero: eq. 10 as fixed/units.h states it (k·len ≤ limit here, so it cannot
+    // saturate), or the clamped magnitude along u.
+    const fixed::Voxels x{fixed::Q16::FromRaw(static_cast<std::int32_t>(u[a]))};
+    r.force[a] = r.clamped ? fixed::Newtons{fixed::Q16::FromRaw(static_cast<std::int32_t>(limit * u[a] / len))}
+                           : fixed::HookeUnsaturated(params.k, x);
+    any |= r.force[a].value.raw();
   }
   r.contact = any != 0;
-  r.penetration_q16 = r.contact ? SaturateToInt32(len) : 0;
+  r.penetration = {fixed::Q16::FromRaw(r.contact ? SaturateToInt32(len) : 0)};
   return r.contact ? std::min(limit, (k * len + 65535) >> 16) : 0;
 }
 
@@ -548,7 +551,7 @@ template <typename Field>
   // of positions below stays under 2^29.6.
   const bool inside = InHipBox(hip, field);
   const GridPos h = inside ? hip : ClampHip(hip, field);
-  if (state.phi > params.near_q16 && !InHipBox(state.proxy, field)) state.proxy = ClampHip(state.proxy, field);
+  if (state.phi > params.near.value.raw() && !InHipBox(state.proxy, field)) state.proxy = ClampHip(state.proxy, field);
   const bool phi_h_known = phi_h != kPhiUnknown && inside;
   TickResult r;
 
@@ -565,14 +568,14 @@ template <typename Field>
     state.last_hip = h;
     state.seated = phi_start >= 0;
     state.valid = true;
-    state.pull_q16 = 0;
-    state.hip_phi_bound_q16 = phi_start;
+    state.pull = {};
+    state.hip_phi_bound = {fixed::Q16::FromRaw(phi_start)};
     r.proxy = h;
     r.iterations = 1;
     return r;
   }
 
-  const std::int64_t delta = params.depth_tolerance_q16;
+  const std::int64_t delta = params.depth_tolerance.value.raw();
   Tick t(field, state, params, Pos(h), delta,
          MaxAbs(Diff(h, state.proxy)) > (std::int64_t{1} << 21),  // the proxy moves < 1 voxel a sample
          AxisVariation(Diff(h, state.last_hip), field.lipschitz()) >
@@ -584,8 +587,8 @@ template <typename Field>
   // shows the HIP inside: last tick's bound plus Λ·|ΔX_h| (the steady press and slide, no sample).
   // The band's Λ serves: from an inside point, φ cannot reach 0 without first crossing cells that
   // are not free space (φ ≤ 0 there), where the band's bound holds.
-  if (!t.phi_h_known && state.phi <= params.near_q16 && state.hip_phi_bound_q16 < 0) {
-    const std::int64_t up = (std::int64_t{state.hip_phi_bound_q16} << 16) +
+  if (!t.phi_h_known && state.phi <= params.near.value.raw() && state.hip_phi_bound.value.raw() < 0) {
+    const std::int64_t up = (std::int64_t{state.hip_phi_bound.value.raw()} << 16) +
                             AxisVariation(Diff(h, state.last_hip), field.lipschitz_band()) + (kSlack << 16);
     if (up < -(std::int64_t{1} << 16)) {
       t.phi_h = -((-up) >> 16);  // rounded up: still an upper bound, < 0
@@ -595,12 +598,12 @@ template <typename Field>
   if (!t.phi_h_known) SamplePhiAtHip(t);
   // In free motion that sample is one of the budget (sphere tracing towards X_h needs it anyway);
   // at the surface it is one more.
-  if (t.at.phi > params.near_q16) t.samples = t.hip_samples;
+  if (t.at.phi > params.near.value.raw()) t.samples = t.hip_samples;
   // Each pass takes at most one field sample; a pass without one ends the loop or samples in the
   // next, so 2·max_iterations + 2 passes bound it.
   for (int pass = 0; pass < 2 * params.max_iterations + 2 && t.samples < params.max_iterations; ++pass) {
     if (t.p == t.h) break;
-    if (t.at.phi > params.near_q16) {
+    if (t.at.phi > params.near.value.raw()) {
       if (FreeStep(t) == Next::kDone) break;
       continue;
     }
@@ -619,8 +622,9 @@ template <typename Field>
 
   const GridPos p = ToGridPos(t.p);
   const GridPos last_hip = state.last_hip, last_proxy = state.proxy;
-  const std::int64_t last_pull = state.pull_q16;
-  state.hip_phi_bound_q16 = t.phi_h_known ? SaturateToInt32(t.phi_h) : std::numeric_limits<std::int32_t>::max();
+  const std::int64_t last_pull = state.pull.value.raw();
+  state.hip_phi_bound = {
+      fixed::Q16::FromRaw(t.phi_h_known ? SaturateToInt32(t.phi_h) : std::numeric_limits<std::int32_t>::max())};
   state.proxy = p;
   state.last_hip = h;
   state.phi = static_cast<std::int32_t>(t.at.phi);
@@ -628,7 +632,7 @@ template <typename Field>
                 static_cast<std::int32_t>(t.at.grad[2])};
   state.inv_grad2 = t.at.inv_grad2;
   state.grad_valid = t.grad_valid;
-  state.pull_q16 = 0;
+  state.pull = {};
   r.proxy = p;
   r.iterations = t.samples;
   r.converged = t.converged;
@@ -638,7 +642,7 @@ template <typename Field>
   // the HIP is inside the field, or outside beyond a part the way to it runs into (held); never
   // with the HIP outside and the way clear, nor for a proxy still catching up in free space.
   const bool inside_hip = t.phi_h_known && t.phi_h < 0;
-  if (t.at.phi > params.near_q16 || !(inside_hip || t.leave_blocked)) return r;
+  if (t.at.phi > params.near.value.raw() || !(inside_hip || t.leave_blocked)) return r;
   // No step: the magnitude rises at most by what the spring's ends moved (k·(|ΔX_h| + |ΔX_p|), the
   // proxy's part at most a voxel) plus max_force/1024; held with the HIP outside (overpowered,
   // through a part) it fades by max_force/1024 a tick instead (1 s at 1 kHz to zero).
@@ -662,7 +666,7 @@ template <typename Field>
                          ((k * std::min<std::int64_t>(hip_step + proxy_step, std::int64_t{1} << 31) + 65535) >> 16));
     }
   }
-  state.pull_q16 = static_cast<std::int32_t>(Force(params, u, len, cap, r));
+  state.pull = {fixed::Q16::FromRaw(static_cast<std::int32_t>(Force(params, u, len, cap, r)))};
   return r;
 }
 
@@ -676,12 +680,12 @@ template <typename Field>
 [[gnu::noinline]] TickResult FreeSampled(const Field& field, const ProxyParams& params, ProxyState& state,
                                          const GridPos& h, const Vec& d) {
   const std::int32_t phi_h = field.Phi(h, state.hip_phi_cache);
-  if (phi_h > 0 && Certified(state.phi, phi_h, d, field.lipschitz(), params.depth_tolerance_q16)) {
+  if (phi_h > 0 && Certified(state.phi, phi_h, d, field.lipschitz(), params.depth_tolerance.value.raw())) {
     state.proxy = h;
     state.last_hip = h;
     state.phi = phi_h;
     state.grad_valid = false;
-    state.hip_phi_bound_q16 = phi_h;
+    state.hip_phi_bound = {fixed::Q16::FromRaw(phi_h)};
     TickResult r;
     r.proxy = h;
     r.iterations = 1;
@@ -696,7 +700,7 @@ namespace {
 
 template <typename Field>
 TickResult TickOn(const Field& field, const ProxyParams& params, ProxyState& state, GridPos hip) {
-  if (!(state.valid && state.seated && state.phi > params.near_q16))
+  if (!(state.valid && state.seated && state.phi > params.near.value.raw()))
     return SlowTick(field, params, state, hip, kPhiUnknown);
 
   // Free motion, the common case: the proxy is off the surface and φ(X_p) is known exactly or
@@ -705,7 +709,7 @@ TickResult TickOn(const Field& field, const ProxyParams& params, ProxyState& sta
   // other paths first clamp both to the grid ± 4096 voxels.
   const Vec d = Diff(hip, state.proxy);
   const std::int64_t reach = AxisVariation(d, field.lipschitz());  // ≥ |φ(x) − φ(X_p)| on [X_p, X_h]
-  if (reach >= (std::int64_t{state.phi} - params.near_q16 - kSlack) << 16) {
+  if (reach >= (std::int64_t{state.phi} - params.near.value.raw() - kSlack) << 16) {
     return FreeSampled(field, params, state, hip, d);
   }
   // All of [X_p, X_h] lies in the ball where φ > 1/2 voxel: move without sampling, and carry

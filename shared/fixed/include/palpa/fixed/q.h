@@ -22,8 +22,9 @@ static_assert((-3 >> 1) == -2);
 
 /// Rounding applied when dropping fraction bits.
 enum class Round {
-  kFloor,    ///< towards −∞ (a plain arithmetic shift)
-  kNearest,  ///< to nearest, ties away from zero (symmetric, so −x rounds as −(x))
+  kFloor,       ///< towards −∞ (a plain arithmetic shift)
+  kNearest,     ///< to nearest, ties away from zero (symmetric, so −x rounds as −(x))
+  kTowardZero,  ///< towards 0, as C++ integer division (symmetric; never grows a magnitude)
 };
 
 /// Shifts `v` right by `bits` (≥ 0) with the given rounding. Pure integer arithmetic: the same
@@ -31,6 +32,7 @@ enum class Round {
 constexpr std::int64_t ShiftRight(std::int64_t v, int bits, Round round) {
   if (bits <= 0) return v;
   if (round == Round::kFloor) return v >> bits;
+  if (round == Round::kTowardZero) return v / (std::int64_t{1} << bits);  // C++ division truncates
   const std::int64_t half = std::int64_t{1} << (bits - 1);
   return v >= 0 ? (v + half) >> bits : -((-v + half) >> bits);
 }

@@ -48,19 +48,19 @@ struct GridFrame {
 
 /// Parameters of the tick in loop formats. Build with MakeProxyParams.
 struct ProxyParams {
-  std::int32_t gamma_q16 = 1 << 16;            ///< eq. 9 γ on the (tangential) HIP term
-  std::int32_t beta_q16 = 1 << 16;             ///< eq. 9 β on the normalised φ term
-  std::int32_t depth_tolerance_q16 = 1 << 14;  ///< δ: no point of the proxy's path has φ < −δ
-  std::int32_t near_q16 = 1 << 15;             ///< below this φ (1/2 voxel) eq. 9 holds the proxy
-  std::int32_t tolerance_q16 = 1 << 8;         ///< convergence: a move or update |Δ|₁ ≤ 1/256 voxel
-  int max_iterations = 4;                      ///< field samples per tick, the hard bound on its work
-  int settle_samples = 1;                      ///< samples per tick unless the proxy lags its target
-  int gradient_samples = 1;                    ///< of which with ∇φ (32 values; the rest φ, 8)
-  fixed::NewtonsPerVoxel k;                    ///< k·h
-  fixed::Newtons max_force;                    ///< force clamp, N
-  std::int32_t mu_static_q16 = 0;              ///< Coulomb μs; 0 = friction off
-  std::int32_t mu_dynamic_q16 = 0;             ///< Coulomb μd ≤ μs
-  double voxel_m = 1;                          ///< for reporting only
+  fixed::Q16 gamma = fixed::Q16::FromInt(1);                    ///< eq. 9 γ on the (tangential) HIP term
+  fixed::Q16 beta = fixed::Q16::FromInt(1);                     ///< eq. 9 β on the normalised φ term
+  fixed::Voxels depth_tolerance{fixed::Q16::FromRaw(1 << 14)};  ///< δ: no point of the proxy's path has φ < −δ
+  fixed::Voxels near{fixed::Q16::FromRaw(1 << 15)};             ///< below this φ (1/2 voxel) eq. 9 holds the proxy
+  fixed::Voxels tolerance{fixed::Q16::FromRaw(1 << 8)};  ///< convergence: a move or update |Δ|₁ ≤ 1/256 voxel
+  int max_iterations = 4;                                ///< field samples per tick, the hard bound on its work
+  int settle_samples = 1;                                ///< samples per tick unless the proxy lags its target
+  int gradient_samples = 1;                              ///< of which with ∇φ (32 values; the rest φ, 8)
+  fixed::NewtonsPerVoxel k;                              ///< k·h
+  fixed::Newtons max_force;                              ///< force clamp, N
+  fixed::Q16 mu_static;                                  ///< Coulomb μs; 0 = friction off
+  fixed::Q16 mu_dynamic;                                 ///< Coulomb μd ≤ μs
+  double voxel_m = 1;                                    ///< for reporting only
 };
 
 /// SI inputs of the proxy.
@@ -97,10 +97,10 @@ struct ProxyState {
   /// An upper bound of |f| last tick, Q16.16 N (0 without contact): the next tick's force may rise
   /// above it only by k·(|ΔX_h| + min(|ΔX_p|, 1 voxel)) + max_force/1024, and falls by
   /// max_force/1024 a tick while the proxy is held with the HIP outside (overpower fade).
-  std::int32_t pull_q16 = 0;
+  fixed::Newtons pull;
   /// An upper bound of φ(last_hip), Q16.16 (INT32_MAX: none). While it shows the HIP inside by
   /// more than it can have moved (Λ·|ΔX_h|), a contact tick need not sample φ(X_h).
-  std::int32_t hip_phi_bound_q16 = std::numeric_limits<std::int32_t>::max();
+  fixed::Voxels hip_phi_bound{fixed::Q16::FromRaw(std::numeric_limits<std::int32_t>::max())};
   bool valid = false;  ///< false: next tick starts the proxy at the HIP (start-up, reset)
   /// Blob v2: the cells last sampled at the proxy and at the HIP (sampler::PhiCache), which a tick
   /// mostly samples again. They change how fast a sample is read, never its value, and record
@@ -114,7 +114,7 @@ struct ProxyState {
 struct TickResult {
   GridPos proxy;
   std::array<fixed::Newtons, 3> force{};  ///< eq. 10: f = −k (X_h − X_p), clamped
-  std::int32_t penetration_q16 = 0;       ///< |X_p − X_h| in voxels when in contact, else 0
+  fixed::Voxels penetration;              ///< |X_p − X_h| when in contact, else 0
   bool contact = false;                   ///< a non-zero force: the surface holds the proxy from the HIP
   bool clamped = false;                   ///< |f| hit max_force
   bool converged = false;                 ///< eq. 9 reached its fixed point (update ≤ tolerance)
