@@ -56,6 +56,58 @@ LipschitzBound Bound(std::int32_t bx, std::int32_t by, std::int32_t bz, std::int
 
 }  // namespace
 
+// Cell and fractions of (x, y, z), or false outside [0, n−1]³. On the last node of an axis: the
+// last cell at fraction 1 (cell = min(⌊x⌋, n − 2), fraction = x − cell).
+template <typename Accessor>
+[[gnu::always_inline]] inline bool Sampler<Accessor>::Locate(std::int32_t x, std::int32_t y, std::int32_t z,
+                                                             Cell& c) const {
+  const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y), uz = static_cast<std::uint32_t>(z);
+  // One unsigned compare per axis rejects both negative positions and those past the last node.
+  if ((ux > last_[0]) | (uy > last_[1]) | (uz > last_[2])) return false;
+  const std::array<std::int32_t, 3>& n = acc_.dims();
+  c.i = std::min(static_cast<std::int32_t>(ux >> 16), n[0] - 2);
+  c.j = std::min(static_cast<std::int32_t>(uy >> 16), n[1] - 2);
+  c.k = std::min(static_cast<std::int32_t>(uz >> 16), n[2] - 2);
+  c.fx = x - (c.i << 16);
+  c.fy = y - (c.j << 16);
+  c.fz = z - (c.k << 16);
+  return true;
+}
+
+// ⌊x⌋, ⌊y⌋, ⌊z⌋ as 16-bit fields, one per value an int32 >> 16 can take, so no two positions in
+// different cells share it.
+template <typename Accessor>
+[[gnu::always_inline]] inline std::uint64_t Sampler<Accessor>::CacheCell(std::int32_t x, std::int32_t y,
+                                                                         std::int32_t z) {
+  return static_cast<std::uint64_t>(static_cast<std::uint16_t>(x >> 16)) << 32 |
+         static_cast<std::uint64_t>(static_cast<std::uint16_t>(y >> 16)) << 16 |
+         static_cast<std::uint64_t>(static_cast<std::uint16_t>(z >> 16));
+}
+
+// Cell c as Locate found it (each index 0 .. 4094). Only these are cached: a position whose
+// CacheCell equals one lies inside that cell, below the grid's last node, at the fractions given
+// by its low 16 bits, exactly as Locate would place it (not so the last node itself, which Locate
+// puts at fraction 1 of the cell below).
+template <typename Accessor>
+[[gnu::always_inline]] inline std::uint64_t Sampler<Accessor>::CacheCell(const Cell& c) {
+  return static_cast<std::uint64_t>(c.i) << 32 | static_cast<std::uint64_t>(c.j) << 16 |
+         static_cast<std::uint64_t>(c.k);
+}
+
+template <typename Accessor>
+template <typename Cache>
+[[gnu::always_inline]] inline bool Sampler<Accessor>::Holds(const Cache& cache, std::int32_t x, std::int32_t y,
+                                                            std::int32_t z) const {
+  return cache.cell == CacheCell(x, y, z) && cache.sampler == id_;
+}
+
+template <typename Accessor>
+Sample Sampler<Accessor>::Background() const {
+  Sample s;
+  s.phi = background_;
+  return s;
+}
+
 template <typename Accessor>
 Sampler<Accessor>::Sampler(const Accessor& storage, std::int32_t band_outside)
     : acc_(storage),

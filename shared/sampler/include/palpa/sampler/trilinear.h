@@ -118,42 +118,14 @@ class Sampler {
   struct Cell {
     std::int32_t i, j, k, fx, fy, fz;
   };
-  // Cell and fractions of (x, y, z), or false outside [0, n−1]³. On the last node of an axis: the
-  // last cell at fraction 1 (cell = min(⌊x⌋, n − 2), fraction = x − cell).
-  bool Locate(std::int32_t x, std::int32_t y, std::int32_t z, Cell& c) const {
-    const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y),
-               uz = static_cast<std::uint32_t>(z);
-    // One unsigned compare per axis rejects both negative positions and those past the last node.
-    if ((ux > last_[0]) | (uy > last_[1]) | (uz > last_[2])) return false;
-    const std::array<std::int32_t, 3>& n = acc_.dims();
-    c.i = std::min(static_cast<std::int32_t>(ux >> 16), n[0] - 2);
-    c.j = std::min(static_cast<std::int32_t>(uy >> 16), n[1] - 2);
-    c.k = std::min(static_cast<std::int32_t>(uz >> 16), n[2] - 2);
-    c.fx = x - (c.i << 16);
-    c.fy = y - (c.j << 16);
-    c.fz = z - (c.k << 16);
-    return true;
-  }
-  // A cache's `cell` of the cell holding Q16.16 position (x, y, z): ⌊x⌋, ⌊y⌋, ⌊z⌋ as 16-bit
-  // fields, one per value an int32 >> 16 can take, so no two positions in different cells share it.
-  static std::uint64_t CacheCell(std::int32_t x, std::int32_t y, std::int32_t z) {
-    return static_cast<std::uint64_t>(static_cast<std::uint16_t>(x >> 16)) << 32 |
-           static_cast<std::uint64_t>(static_cast<std::uint16_t>(y >> 16)) << 16 |
-           static_cast<std::uint64_t>(static_cast<std::uint16_t>(z >> 16));
-  }
-  // The cache's `cell` of cell c as Locate found it (each index 0 .. 4094). Only these are cached:
-  // a position whose CacheCell equals one lies inside that cell, below the grid's last node, at
-  // the fractions given by its low 16 bits, exactly as Locate would place it (not so the last node
-  // itself, which Locate puts at fraction 1 of the cell below).
-  static std::uint64_t CacheCell(const Cell& c) {
-    return static_cast<std::uint64_t>(c.i) << 32 | static_cast<std::uint64_t>(c.j) << 16 |
-           static_cast<std::uint64_t>(c.k);
-  }
+  // Cell and fractions of (x, y, z), or false outside [0, n−1]³ (trilinear.cc, as the rest).
+  bool Locate(std::int32_t x, std::int32_t y, std::int32_t z, Cell& c) const;
+  // A cache's `cell` of position (x, y, z), and of a cell as Locate found it.
+  static std::uint64_t CacheCell(std::int32_t x, std::int32_t y, std::int32_t z);
+  static std::uint64_t CacheCell(const Cell& c);
   // Whether a cache filled by this sampler holds the cell of (x, y, z).
   template <typename Cache>
-  [[gnu::always_inline]] bool Holds(const Cache& cache, std::int32_t x, std::int32_t y, std::int32_t z) const {
-    return cache.cell == CacheCell(x, y, z) && cache.sampler == id_;
-  }
+  bool Holds(const Cache& cache, std::int32_t x, std::int32_t y, std::int32_t z) const;
   // Blob v2's Phi (kCache: through `cache`, else null), and its cells that spill along two or
   // three axes; kCache: their corners are also written to `keep`.
   template <bool kCache>
@@ -164,11 +136,7 @@ class Sampler {
   // Outside the grid: the boundary value extended outward (see the class comment).
   std::int32_t PhiOutside(std::int32_t x, std::int32_t y, std::int32_t z) const;
   Sample AtOutside(std::int32_t x, std::int32_t y, std::int32_t z) const;
-  Sample Background() const {
-    Sample s;
-    s.phi = background_;
-    return s;
-  }
+  Sample Background() const;
 
   Accessor acc_;
   std::array<std::uint32_t, 3> last_;  // (n − 1)·65536 per axis
