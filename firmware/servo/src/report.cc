@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "palpa/io/file_safety.h"
+#include "palpa/record/latency_histogram.h"
 
 namespace palpa::servo {
 namespace {
@@ -177,29 +178,21 @@ std::string FiguresJson(const LatencyFigures& f) {
 }  // namespace
 
 std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s) {
-  const auto bins = h.bins();
-  std::size_t last = 0;
-  for (std::size_t i = 0; i < bins.size(); ++i)
-    if (bins[i] != 0) last = i;
-  std::string out = "# palpad wake-up latency histogram, 1 us bins (cyclictest -h layout)\n";
-  for (std::size_t i = 0; i <= last; ++i) out += Printf("%06zu %06u\n", i, bins[i]);
-  out += Printf("# Total: %09llu\n", static_cast<unsigned long long>(h.count()));
-  out += Printf("# Min Latencies: %05lld\n", static_cast<long long>(h.min_ns() / 1000));
-  out += Printf("# Avg Latencies: %05lld\n", static_cast<long long>(std::llround(h.mean_ns() / 1000)));
-  out += Printf("# Max Latencies: %05lld\n", static_cast<long long>(h.max_ns() / 1000));
-  out += Printf("# Histogram Overflows: %05llu\n", static_cast<unsigned long long>(h.overflow()));
-  out += Printf("# palpad max_ns: %lld\n", static_cast<long long>(h.max_ns()));
-  out += Printf("# palpad compute_ns: %lld %lld %lld %lld\n", static_cast<long long>(s.compute.p50_ns),
-                static_cast<long long>(s.compute.p99_ns), static_cast<long long>(s.compute.p999_ns),
-                static_cast<long long>(s.compute.max_ns));
-  out += Printf("# palpad overruns: %llu\n", static_cast<unsigned long long>(s.overruns));
-  out +=
-      Printf("# palpad max_consecutive_overruns: %llu\n", static_cast<unsigned long long>(s.max_consecutive_overruns));
-  out += Printf("# palpad dropped_rows: %llu\n", static_cast<unsigned long long>(s.dropped_rows));
-  out += Printf("# palpad rate_hz: %.17g\n", s.rate_hz);
-  out += Printf("# palpad realtime: %s\n", !s.realtime_requested ? "not requested" : s.realtime ? "yes" : "no");
-  out += "# palpad rt_refused: " + s.rt_refused + "\n";
-  return out;
+  static_assert(WakeLatencyHistogram::kBinWidthNs == 1000, "the histogram file has 1 us bins");
+  const record::LatencyTotals totals{h.count(), h.overflow(), h.min_ns(), h.mean_ns(), h.max_ns()};
+  const record::PalpadLine lines[] = {
+      {"compute_ns",
+       Printf("%lld %lld %lld %lld", static_cast<long long>(s.compute.p50_ns), static_cast<long long>(s.compute.p99_ns),
+              static_cast<long long>(s.compute.p999_ns), static_cast<long long>(s.compute.max_ns))},
+      {"overruns", std::to_string(s.overruns)},
+      {"max_consecutive_overruns", std::to_string(s.max_consecutive_overruns)},
+      {"dropped_rows", std::to_string(s.dropped_rows)},
+      {"rate_hz", Printf("%.17g", s.rate_hz)},
+      {"realtime", !s.realtime_requested ? "not requested"
+                   : s.realtime          ? "yes"
+                                         : "no"},
+      {"rt_refused", s.rt_refused}};
+  return record::FormatLatencyHistogram(h.bins(), totals, lines);
 }
 
 std::string JsonString(std::string_view s) {

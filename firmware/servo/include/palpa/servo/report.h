@@ -57,7 +57,7 @@ class AtomicFile {
 /// WriteCsv through an AtomicFile.
 std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::span<const LogRow> rows);
 
-/// Percentiles of one histogram, ns (nearest rank, bin lower edge; see palpa/rt/histogram.h).
+/// Percentiles of one histogram, ns (nearest rank, bin lower edge; record::PercentileOfBins).
 struct LatencyFigures {
   std::uint64_t count = 0;
   std::int64_t min_ns = 0;
@@ -124,12 +124,10 @@ std::string SummaryText(const ServoSummary& s);
 /// rt_refused, end, fault.
 std::string SummaryJson(const ServoSummary& s);
 
-/// The wake-up latency histogram in cyclictest's histogram file layout (rt-tests `-h US
-/// --histfile`): "%06d %06d" per 1 µs bin up to the last non-empty one, then "# Total:",
-/// "# Min Latencies:", "# Avg Latencies:", "# Max Latencies:" (µs, truncated),
-/// "# Histogram Overflows:"; then palpad's own "# palpad <key>: <value>" lines: max_ns, compute_ns
-/// (p50 p99 p999 max), overruns, max_consecutive_overruns, dropped_rows, rate_hz, realtime,
-/// rt_refused. The same parser reads palpad's and cyclictest's files (palpa bench latency).
+/// The wake-up latency histogram file (record::FormatLatencyHistogram: cyclictest's histogram file
+/// layout) with palpad's own "# palpad <key>: <value>" lines: max_ns, compute_ns (p50 p99 p999
+/// max), overruns, max_consecutive_overruns, dropped_rows, rate_hz, realtime, rt_refused. One
+/// parser reads palpad's and cyclictest's files (record::ReadLatencyHistogram, palpa bench latency).
 std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s);
 
 /// `s` as a JSON string literal (quotes, backslashes and control characters escaped).
