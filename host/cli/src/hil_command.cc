@@ -36,10 +36,10 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "field_sampler.h"
 #include "palpa/blob/blob.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/record/run_record.h"
 #include "palpa/trace/trace.h"
 
@@ -94,7 +94,7 @@ std::string Join(const std::vector<std::string>& v, std::string_view sep = " ") 
 }
 
 bool WriteText(const fs::path& p, std::string_view text, std::string& error) {
-  auto w = WriteFileAtomically(p.string(), std::as_bytes(std::span(text.data(), text.size())));
+  auto w = io::WriteFileAtomically(p.string(), std::as_bytes(std::span(text.data(), text.size())));
   if (!w) error = w.error();
   return w.has_value();
 }

@@ -23,38 +23,8 @@ using record::WriteCsvRow;
 /// → same bytes. False on an I/O error.
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows);
 
-/// A file written under a temporary name in the target's directory and renamed over the target
-/// only by Commit(), after fsync: readers see the old file or the complete new one, never a part.
-/// Destroying an uncommitted AtomicFile removes the temporary file; a fatal signal removes it too
-/// (its name is in palpa/rt/temp_registry.h while it exists).
-class AtomicFile {
- public:
-  /// Creates `<path>.tmp.XXXXXX` (mode 0666 minus umask), open for writing and reading back.
-  /// Error: a sentence naming the path (a target that is a device, FIFO, socket or directory too).
-  static std::expected<AtomicFile, std::string> Create(const std::string& path);
-
-  AtomicFile(AtomicFile&& other) noexcept;
-  AtomicFile& operator=(AtomicFile&&) = delete;
-  AtomicFile(const AtomicFile&) = delete;
-  AtomicFile& operator=(const AtomicFile&) = delete;
-  ~AtomicFile();
-
-  std::FILE* file() const { return file_; }
-  /// Flushes, fsyncs, closes and renames onto the target, then fsyncs the directory. Errors name
-  /// the path; on error the temporary is removed and the target left as it was.
-  std::expected<void, std::string> Commit();
-
- private:
-  AtomicFile(std::string path, std::string temp_path, std::FILE* file, int temp_slot)
-      : path_(std::move(path)), temp_path_(std::move(temp_path)), file_(file), temp_slot_(temp_slot) {}
-
-  std::string path_;
-  std::string temp_path_;
-  std::FILE* file_ = nullptr;
-  int temp_slot_ = -1;  // rt::RegisterTempPath slot of temp_path_
-};
-
-/// WriteCsv through an AtomicFile.
+/// WriteCsv through an io::AtomicFile (palpa/io/atomic_file.h): the target is replaced whole or
+/// not at all. Error: a sentence naming the path.
 std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::span<const LogRow> rows);
 
 /// Percentiles of one histogram, ns (nearest rank, bin lower edge; record::PercentileOfBins).
