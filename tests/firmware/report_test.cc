@@ -1,46 +1,14 @@
 #include "palpa/servo/report.h"
 
-#include <dirent.h>
 #include <gtest/gtest.h>
-#include <sys/stat.h>
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
 namespace palpa::servo {
 namespace {
-
-std::string ReadAll(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-bool Exists(const std::string& path) {
-  struct stat st {};
-  return stat(path.c_str(), &st) == 0;
-}
-
-// Entries of `dir` whose name contains `part`.
-int CountEntries(const std::string& dir, const std::string& part) {
-  int n = 0;
-  if (DIR* d = opendir(dir.c_str())) {
-    while (const dirent* e = readdir(d)) n += std::string(e->d_name).find(part) != std::string::npos ? 1 : 0;
-    closedir(d);
-  }
-  return n;
-}
-
-std::string FreshDir(const std::string& name) {
-  std::string dir = ::testing::TempDir() + "/" + name + "XXXXXX";
-  EXPECT_NE(mkdtemp(dir.data()), nullptr);
-  return dir;
-}
 
 TEST(Report, PercentileIsNearestRank) {
   const std::vector<std::int64_t> ns = {50, 10, 40, 20, 30, 100, 90, 80, 70, 60};
@@ -79,34 +47,6 @@ TEST(Report, CsvRowsRoundTripQ16Values) {
   EXPECT_EQ(std::lround((v[7] + 1.5) * 65536), 1);
   EXPECT_NEAR(v[4], row.proxy_m[0], 1e-12);
   EXPECT_NEAR(v[1], row.hip_m[0], 1e-12);
-}
-
-TEST(Report, AtomicFileAppearsOnlyOnCommit) {
-  const std::string dir = FreshDir("palpa_atomic");
-  const std::string path = dir + "/out.csv";
-  {
-    auto f = AtomicFile::Create(path);
-    ASSERT_TRUE(f.has_value()) << f.error();
-    std::fputs("partial", f->file());
-    EXPECT_FALSE(Exists(path));
-  }  // destroyed uncommitted
-  EXPECT_FALSE(Exists(path));
-  EXPECT_EQ(CountEntries(dir, ".tmp."), 0) << "temporary file left behind";
-
-  auto f = AtomicFile::Create(path);
-  ASSERT_TRUE(f.has_value());
-  std::fputs("complete\n", f->file());
-  ASSERT_TRUE(f->Commit().has_value());
-  EXPECT_EQ(ReadAll(path), "complete\n");
-  EXPECT_EQ(CountEntries(dir, ".tmp."), 0);
-  std::remove(path.c_str());
-  rmdir(dir.c_str());
-}
-
-TEST(Report, AtomicFileInAMissingDirectoryFailsNamingThePath) {
-  auto f = AtomicFile::Create("/nonexistent-palpa-dir/out.csv");
-  ASSERT_FALSE(f.has_value());
-  EXPECT_NE(f.error().find("/nonexistent-palpa-dir/out.csv"), std::string::npos) << f.error();
 }
 
 TEST(Report, SummaryTextAndJsonCarryEveryKey) {

@@ -18,6 +18,7 @@
 
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/gpio_sim/sim_gpio.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/servo/report.h"
 #include "palpa/servo/servo_loop.h"
 #include "palpa/servo/telemetry_drain.h"
@@ -414,7 +415,7 @@ TEST(TelemetryDrain, StreamedCsvEqualsTheWholeLogAndNothingIsDroppedInLockstep) 
   c.telemetry_capacity = 64;
   c.wait_when_full = true;
   ServoLoop loop(field.view(), Params(field.voxel_m()), device, c, stop);
-  auto file = AtomicFile::Create(streamed);
+  auto file = io::AtomicFile::Create(streamed);
   ASSERT_TRUE(file.has_value());
   DrainConfig dc;
   dc.csv = file->file();

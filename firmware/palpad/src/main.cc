@@ -19,6 +19,7 @@
 #include "palpa/blob/blob.h"
 #include "palpa/device_sim/sim_device.h"
 #include "palpa/gpio_linux/gpiod_lines.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/io/file_safety.h"
 #include "palpa/net/client.h"
 #include "palpa/net_server/listener.h"
@@ -181,9 +182,9 @@ int Run(const palpa::palpad::Options& o) {
   // Open the output now so that an unwritable path fails before the run, not after it.
   // /dev/null (a service running for hours): no CSV at all.
   const bool keep_csv = o.out_path != "/dev/null";
-  std::optional<palpa::servo::AtomicFile> out;
+  std::optional<palpa::io::AtomicFile> out;
   if (keep_csv) {
-    auto file = palpa::servo::AtomicFile::Create(o.out_path);
+    auto file = palpa::io::AtomicFile::Create(o.out_path);
     if (!file) return Fail(kExitBadInput, file.error());
     out.emplace(std::move(*file));
   }
@@ -367,14 +368,14 @@ int Run(const palpa::palpad::Options& o) {
   summary.rt_refused = rt.Refused();
   std::fputs(palpa::servo::SummaryText(summary).c_str(), stdout);
   if (!o.summary_json_path.empty()) {
-    auto json = palpa::servo::AtomicFile::Create(o.summary_json_path);
+    auto json = palpa::io::AtomicFile::Create(o.summary_json_path);
     if (!json) return Fail(kExitRunFailed, json.error());
     if (std::fputs(palpa::servo::SummaryJson(summary).c_str(), json->file()) < 0)
       return Fail(kExitRunFailed, "cannot write " + o.summary_json_path);
     if (auto committed = json->Commit(); !committed) return Fail(kExitRunFailed, committed.error());
   }
   if (!o.latency_histogram_path.empty()) {
-    auto hist = palpa::servo::AtomicFile::Create(o.latency_histogram_path);
+    auto hist = palpa::io::AtomicFile::Create(o.latency_histogram_path);
     if (!hist) return Fail(kExitRunFailed, hist.error());
     if (std::fputs(palpa::servo::LatencyHistogramText(loop.wake_latency(), summary).c_str(), hist->file()) < 0)
       return Fail(kExitRunFailed, "cannot write " + o.latency_histogram_path);

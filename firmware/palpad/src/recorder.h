@@ -6,7 +6,7 @@
 // refuses (outside the Falcon workspace, time not increasing) are counted too. Both counts are
 // reported after the run, never silent.
 //
-// Files are written through servo::AtomicFile and renamed into place by Commit (after fsync), like
+// Files are written through io::AtomicFile and renamed into place by Commit (after fsync), like
 // --out. Header-only: palpad is the only user.
 #pragma once
 
@@ -18,7 +18,7 @@
 #include <string>
 #include <utility>
 
-#include "palpa/servo/report.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/servo/telemetry_drain.h"
 #include "palpa/trace/trace.h"
 
@@ -32,7 +32,7 @@ class Recorder final : public servo::TelemetrySink {
                                                                     const std::string& comment) {
     std::unique_ptr<Recorder> r(new Recorder);
     if (!trace_path.empty()) {
-      auto f = servo::AtomicFile::Create(trace_path);
+      auto f = io::AtomicFile::Create(trace_path);
       if (!f) return std::unexpected(f.error());
       r->trace_.emplace(std::move(*f));
       r->trace_path_ = trace_path;
@@ -40,7 +40,7 @@ class Recorder final : public servo::TelemetrySink {
       if (!r->writer_->Begin()) return std::unexpected("cannot write " + trace_path);
     }
     if (!timing_path.empty()) {
-      auto f = servo::AtomicFile::Create(timing_path);
+      auto f = io::AtomicFile::Create(timing_path);
       if (!f) return std::unexpected(f.error());
       r->timing_.emplace(std::move(*f));
       r->timing_path_ = timing_path;
@@ -100,9 +100,9 @@ class Recorder final : public servo::TelemetrySink {
  private:
   Recorder() = default;
 
-  // Written as <path>.tmp.XXXXXX (servo::AtomicFile: checked target, fsync, rename, the temporary
+  // Written as <path>.tmp.XXXXXX (io::AtomicFile: checked target, fsync, rename, the temporary
   // registered for the fatal-signal path) and renamed onto <path> by Commit; removed if never committed.
-  std::optional<servo::AtomicFile> trace_, timing_;
+  std::optional<io::AtomicFile> trace_, timing_;
   std::string trace_path_, timing_path_;
   std::unique_ptr<trace::TraceStreamWriter> writer_;
   std::uint64_t next_tick_ = 0, gaps_ = 0, samples_ = 0, ring_dropped_ = 0;

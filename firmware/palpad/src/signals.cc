@@ -6,7 +6,7 @@
 #include <cstring>
 #include <exception>
 
-#include "palpa/rt/temp_registry.h"
+#include "palpa/io/temp_registry.h"
 
 namespace palpa::palpad {
 namespace {
@@ -38,7 +38,7 @@ extern "C" void OnStopSignal(int sig) {
 // action instead of a process that holds its last force.
 void Emergency(int sig) {
   if (g_fatal_entered.exchange(1, std::memory_order_acq_rel) != 0) return;  // a second crash: just die
-  const int removed = rt::UnlinkRegisteredTempPaths();
+  const int removed = io::UnlinkRegisteredTempPaths();
   Say("palpad: fatal signal ");
   Say(SignalName(sig));
   Say(removed > 0 ? ": temporary files removed; " : ": ");

@@ -1,11 +1,5 @@
 #include "palpa/servo/report.h"
 
-#include "palpa/rt/temp_registry.h"
-
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -14,7 +8,8 @@
 #include <utility>
 #include <vector>
 
-#include "palpa/io/file_safety.h"
+#include "palpa/io/atomic_file.h"
+#include "palpa/record/latency_histogram.h"
 
 namespace palpa::servo {
 namespace {
@@ -33,13 +28,6 @@ std::string ErrnoMessage(const char* what, const std::string& path) {
   return Printf("%s %s: %s", what, path.c_str(), std::strerror(errno));
 }
 
-std::string DirectoryOf(const std::string& path) {
-  const auto slash = path.rfind('/');
-  if (slash == std::string::npos) return ".";
-  if (slash == 0) return "/";
-  return path.substr(0, slash);
-}
-
 }  // namespace
 
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows) {
@@ -49,72 +37,8 @@ bool WriteCsv(std::FILE* out, std::span<const LogRow> rows) {
   return std::ferror(out) == 0;
 }
 
-std::expected<AtomicFile, std::string> AtomicFile::Create(const std::string& path) {
-  // rename() replaces any node: a device, FIFO or directory is never a target (issue 18).
-  if (auto ok = io::CheckOutputTarget(path); !ok) return std::unexpected(std::move(ok.error().message));
-  std::string temp = path + ".tmp.XXXXXX";
-  const int fd = mkstemp(temp.data());
-  if (fd < 0) return std::unexpected(ErrnoMessage("cannot create a temporary file for", path));
-  // mkstemp makes the file 0600; give the result the mode an ordinary create would.
-  const mode_t mask = umask(0);
-  umask(mask);
-  (void)fchmod(fd, static_cast<mode_t>(0666) & ~mask);
-  std::FILE* f = fdopen(fd, "w+");  // "+": palpad's binary trace reads itself back for its CRC
-  if (f == nullptr) {
-    std::string message = ErrnoMessage("cannot open", temp);
-    close(fd);
-    unlink(temp.c_str());
-    return std::unexpected(std::move(message));
-  }
-  const int slot = rt::RegisterTempPath(temp.c_str());
-  return AtomicFile(path, std::move(temp), f, slot);
-}
-
-AtomicFile::AtomicFile(AtomicFile&& other) noexcept
-    : path_(std::move(other.path_)),
-      temp_path_(std::move(other.temp_path_)),
-      file_(std::exchange(other.file_, nullptr)),
-      temp_slot_(std::exchange(other.temp_slot_, -1)) {}
-
-AtomicFile::~AtomicFile() {
-  if (file_ != nullptr) {
-    std::fclose(file_);
-    unlink(temp_path_.c_str());
-  }
-  rt::UnregisterTempPath(temp_slot_);
-}
-
-std::expected<void, std::string> AtomicFile::Commit() {
-  if (file_ == nullptr) return std::unexpected("already committed: " + path_);
-  std::FILE* f = std::exchange(file_, nullptr);
-  bool ok = std::fflush(f) == 0 && std::ferror(f) == 0;
-  std::string message = ok ? std::string() : ErrnoMessage("cannot write", temp_path_);
-  if (ok && fsync(fileno(f)) != 0) {
-    ok = false;
-    message = ErrnoMessage("cannot fsync", temp_path_);
-  }
-  if (std::fclose(f) != 0 && ok) {
-    ok = false;
-    message = ErrnoMessage("cannot close", temp_path_);
-  }
-  if (ok && std::rename(temp_path_.c_str(), path_.c_str()) != 0) {
-    ok = false;
-    message = ErrnoMessage("cannot rename the temporary file onto", path_);
-  }
-  if (!ok) unlink(temp_path_.c_str());
-  rt::UnregisterTempPath(std::exchange(temp_slot_, -1));  // renamed or removed: nothing left to clean
-  if (!ok) return std::unexpected(std::move(message));
-  // Make the rename itself durable. Failing here leaves a complete file, so it is not an error.
-  const int dir = open(DirectoryOf(path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir >= 0) {
-    (void)fsync(dir);
-    close(dir);
-  }
-  return {};
-}
-
 std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::span<const LogRow> rows) {
-  auto file = AtomicFile::Create(path);
+  auto file = io::AtomicFile::Create(path);
   if (!file) return std::unexpected(std::move(file.error()));
   if (!WriteCsv(file->file(), rows)) return std::unexpected(ErrnoMessage("cannot write", path));
   return file->Commit();
@@ -177,29 +101,21 @@ std::string FiguresJson(const LatencyFigures& f) {
 }  // namespace
 
 std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s) {
-  const auto bins = h.bins();
-  std::size_t last = 0;
-  for (std::size_t i = 0; i < bins.size(); ++i)
-    if (bins[i] != 0) last = i;
-  std::string out = "# palpad wake-up latency histogram, 1 us bins (cyclictest -h layout)\n";
-  for (std::size_t i = 0; i <= last; ++i) out += Printf("%06zu %06u\n", i, bins[i]);
-  out += Printf("# Total: %09llu\n", static_cast<unsigned long long>(h.count()));
-  out += Printf("# Min Latencies: %05lld\n", static_cast<long long>(h.min_ns() / 1000));
-  out += Printf("# Avg Latencies: %05lld\n", static_cast<long long>(std::llround(h.mean_ns() / 1000)));
-  out += Printf("# Max Latencies: %05lld\n", static_cast<long long>(h.max_ns() / 1000));
-  out += Printf("# Histogram Overflows: %05llu\n", static_cast<unsigned long long>(h.overflow()));
-  out += Printf("# palpad max_ns: %lld\n", static_cast<long long>(h.max_ns()));
-  out += Printf("# palpad compute_ns: %lld %lld %lld %lld\n", static_cast<long long>(s.compute.p50_ns),
-                static_cast<long long>(s.compute.p99_ns), static_cast<long long>(s.compute.p999_ns),
-                static_cast<long long>(s.compute.max_ns));
-  out += Printf("# palpad overruns: %llu\n", static_cast<unsigned long long>(s.overruns));
-  out +=
-      Printf("# palpad max_consecutive_overruns: %llu\n", static_cast<unsigned long long>(s.max_consecutive_overruns));
-  out += Printf("# palpad dropped_rows: %llu\n", static_cast<unsigned long long>(s.dropped_rows));
-  out += Printf("# palpad rate_hz: %.17g\n", s.rate_hz);
-  out += Printf("# palpad realtime: %s\n", !s.realtime_requested ? "not requested" : s.realtime ? "yes" : "no");
-  out += "# palpad rt_refused: " + s.rt_refused + "\n";
-  return out;
+  static_assert(WakeLatencyHistogram::kBinWidthNs == 1000, "the histogram file has 1 us bins");
+  const record::LatencyTotals totals{h.count(), h.overflow(), h.min_ns(), h.mean_ns(), h.max_ns()};
+  const record::PalpadLine lines[] = {
+      {"compute_ns",
+       Printf("%lld %lld %lld %lld", static_cast<long long>(s.compute.p50_ns), static_cast<long long>(s.compute.p99_ns),
+              static_cast<long long>(s.compute.p999_ns), static_cast<long long>(s.compute.max_ns))},
+      {"overruns", std::to_string(s.overruns)},
+      {"max_consecutive_overruns", std::to_string(s.max_consecutive_overruns)},
+      {"dropped_rows", std::to_string(s.dropped_rows)},
+      {"rate_hz", Printf("%.17g", s.rate_hz)},
+      {"realtime", !s.realtime_requested ? "not requested"
+                   : s.realtime          ? "yes"
+                                         : "no"},
+      {"rt_refused", s.rt_refused}};
+  return record::FormatLatencyHistogram(h.bins(), totals, lines);
 }
 
 std::string JsonString(std::string_view s) {

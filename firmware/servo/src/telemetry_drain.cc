@@ -2,9 +2,9 @@
 
 #include <cstdio>
 #include <ctime>
+#include <span>
 
-#include "palpa/io/file_safety.h"
-#include "palpa/rt/temp_registry.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/servo/report.h"
 
 namespace palpa::servo {
@@ -115,21 +115,10 @@ std::string TelemetryDrain::StatusJson(const char* state) const {
 bool TelemetryDrain::WriteStatus(const char* state) {
   if (config_.status_path.empty()) return true;
   const std::string json = StatusJson(state);
-  // Re-checked on every write: rename() would replace a device or FIFO put there meanwhile.
-  if (!io::CheckOutputTarget(config_.status_path)) return false;
-  const std::string temp = config_.status_path + ".tmp";
-  // Registered while it exists, so that a fatal signal between fopen and rename removes it.
-  const int slot = rt::RegisterTempPath(temp.c_str());
-  std::FILE* f = std::fopen(temp.c_str(), "w");
-  if (f == nullptr) {
-    rt::UnregisterTempPath(slot);
-    return false;  // a live view: a failed update is retried next period
-  }
-  const bool ok = std::fputs(json.c_str(), f) >= 0;
-  const bool renamed = std::fclose(f) == 0 && ok && std::rename(temp.c_str(), config_.status_path.c_str()) == 0;
-  if (!renamed) (void)std::remove(temp.c_str());
-  rt::UnregisterTempPath(slot);
-  return renamed;
+  // The target is checked on every write (rename() would replace a device or FIFO put there
+  // meanwhile), the temporary registered for the fatal-signal path. Not fsync'ed: a live view.
+  // A failed update is retried next period.
+  return io::WriteFileAtomically(config_.status_path, std::as_bytes(std::span(json)), {.durable = false}).has_value();
 }
 
 }  // namespace palpa::servo

@@ -4,8 +4,8 @@
 // Why palpa runs palpad rather than linking the loop: the figure people need is that of the
 // binary that runs on the board — palpad's own real-time set-up, its telemetry drain and watchdog
 // threads included. palpad writes its wake-up histogram in cyclictest's histogram file layout
-// (--latency-histogram), so one parser and one percentile definition (palpa/rt/histogram.h) read
-// both sides. On a board, where palpa is not installed, the same two commands can be run by hand.
+// (--latency-histogram), so one parser and one percentile definition (palpa/record/latency_histogram.h)
+// read both sides. On a board, where palpa is not installed, the same two commands can be run by hand.
 //
 // The load: a sphere field (R = 10 mm, 0.5 mm voxels, built here) and a HIP that presses 1 mm in
 // and slides around it, so most ticks are contact ticks with a full proxy update.
@@ -24,16 +24,14 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <map>
 #include <numbers>
-#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "commands.h"
 #include "palpa/blob/blob.h"
-#include "palpa/rt/histogram.h"
+#include "palpa/record/latency_histogram.h"
 #include "palpa/trace/trace.h"
 
 namespace palpa::cli {
@@ -41,74 +39,10 @@ namespace {
 
 constexpr int kHistogramUs = 20000;  // bins tracked by both tools (palpad's WakeLatencyHistogram range)
 
-// One side's histogram file (palpad's or cyclictest's: the same layout).
-struct Histogram {
-  std::vector<std::uint64_t> bins;  // 1 µs bins
-  std::uint64_t overflow = 0;
-  std::int64_t max_ns = 0;  // exact for palpad, µs·1000 for cyclictest
-  std::uint64_t count = 0;
-  std::map<std::string, std::string> palpad;  // "# palpad key: value" lines
-
-  std::int64_t PercentileUs(double q) const {
-    return rt::PercentileOfBins<std::uint64_t>(bins, overflow, 1000, q, max_ns) / 1000;
-  }
-  std::string Palpad(const std::string& key) const {
-    const auto it = palpad.find(key);
-    return it == palpad.end() ? "?" : it->second;
-  }
-  std::int64_t MinUs() const {
-    for (std::size_t i = 0; i < bins.size(); ++i)
-      if (bins[i] != 0) return static_cast<std::int64_t>(i);
-    return max_ns / 1000;
-  }
-};
-
 std::string Trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t");
   const auto e = s.find_last_not_of(" \t\r");
   return b == std::string::npos ? "" : s.substr(b, e - b + 1);
-}
-
-// Parses the cyclictest -h/--histfile layout (one thread). Errors name the file and line.
-std::optional<Histogram> ReadHistogram(const std::string& path, std::string& error) {
-  std::ifstream in(path);
-  if (!in) {
-    error = path + ": cannot read: " + std::strerror(errno);
-    return std::nullopt;
-  }
-  Histogram h;
-  std::string line;
-  int n = 0;
-  std::int64_t max_us = -1;
-  while (std::getline(in, line)) {
-    ++n;
-    if (line.empty()) continue;
-    if (line[0] == '#') {
-      const auto colon = line.find(':');
-      if (colon == std::string::npos) continue;
-      const std::string key = Trim(line.substr(1, colon - 1));
-      const std::string value = Trim(line.substr(colon + 1));
-      if (key == "Max Latencies") max_us = std::atoll(value.c_str());
-      if (key == "Histogram Overflows") h.overflow = std::strtoull(value.c_str(), nullptr, 10);
-      if (key.starts_with("palpad ")) h.palpad[key.substr(7)] = value;
-      continue;
-    }
-    unsigned long long bin = 0, count = 0;
-    if (std::sscanf(line.c_str(), "%llu %llu", &bin, &count) != 2 || bin >= 10'000'000) {
-      error = path + ":" + std::to_string(n) + ": not a histogram line: '" + line + "'";
-      return std::nullopt;
-    }
-    if (h.bins.size() <= bin) h.bins.resize(bin + 1, 0);
-    h.bins[bin] += count;
-  }
-  if (max_us < 0) {
-    error = path + ": no '# Max Latencies' line (not a cyclictest histogram)";
-    return std::nullopt;
-  }
-  h.max_ns = h.palpad.count("max_ns") != 0 ? std::atoll(h.palpad["max_ns"].c_str()) : max_us * 1000;
-  h.count = h.overflow;
-  for (const std::uint64_t c : h.bins) h.count += c;
-  return h;
 }
 
 // Starts argv with stdout and stderr to files; the child's pid, or -1.
@@ -255,24 +189,18 @@ std::vector<trace::TraceSample> SlideTrace(const std::array<double, 3>& c, doubl
 constexpr std::array<int, 17> kEdgesUs = {0,   10,  20,  30,   40,   50,   75,    100,         150,
                                           200, 300, 500, 1000, 2000, 5000, 10000, kHistogramUs};
 
-std::uint64_t CountIn(const Histogram& h, int lo, int hi) {
+using record::LatencyHistogram;
+
+std::uint64_t CountIn(const LatencyHistogram& h, int lo, int hi) {
   std::uint64_t n = 0;
   for (int i = lo; i < hi && i < static_cast<int>(h.bins.size()); ++i) n += h.bins[static_cast<std::size_t>(i)];
   return n;
 }
 
-void PrintRow(const char* name, const Histogram& h) {
-  fmt::print("  {:<22}{:>9}{:>8}{:>8}{:>8}{:>8}{:>9}{:>11}\n", name, h.count, h.MinUs(), h.PercentileUs(0.5),
-             h.PercentileUs(0.99), h.PercentileUs(0.999), h.max_ns / 1000, h.overflow);
-}
-
-// Adds `b` into `a` (bins, overflow, count; max of the maxima).
-void Merge(Histogram& a, const Histogram& b) {
-  if (a.bins.size() < b.bins.size()) a.bins.resize(b.bins.size(), 0);
-  for (std::size_t i = 0; i < b.bins.size(); ++i) a.bins[i] += b.bins[i];
-  a.overflow += b.overflow;
-  a.count += b.count;
-  a.max_ns = std::max(a.max_ns, b.max_ns);
+void PrintRow(const char* name, const LatencyHistogram& h) {
+  fmt::print("  {:<22}{:>9}{:>8}{:>8}{:>8}{:>8}{:>9}{:>11}\n", name, h.count, h.MinNs() / 1000,
+             h.PercentileNs(0.5) / 1000, h.PercentileNs(0.99) / 1000, h.PercentileNs(0.999) / 1000, h.max_ns / 1000,
+             h.overflow);
 }
 
 }  // namespace
@@ -366,7 +294,7 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
                                  "--histfile=" + path("cyclictest.hist")};
   if (!cpu.empty()) ca.insert(ca.end(), {"-a", cpu});
 
-  Histogram loop, anchor, viewed;  // viewed: palpad with palpa view --connect attached
+  LatencyHistogram loop, anchor, viewed;  // viewed: palpad with palpa view --connect attached
   long long viewed_overruns = 0;
   std::uint64_t viewer_polls = 0, viewer_failed = 0;
   double viewer_seconds = 0;
@@ -376,7 +304,6 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
   std::string palpad_err;
   std::array<long long, 4> compute{};  // worst round's p50, p99, p99.9, max (ns)
   long long overruns = 0, longest = 0, dropped = 0;
-  std::string error;
   for (int r = 0; r < rounds; ++r) {
     const int pc = RunProcess(pa, path("palpad.out"), path("palpad.err"));
     const std::string err = ReadText(path("palpad.err"));
@@ -385,13 +312,13 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
       return kExitIo;
     }
     if (r == 0) palpad_err = err;
-    const auto h = ReadHistogram(path("palpad.hist"), error);
+    const auto h = record::ReadLatencyHistogram(path("palpad.hist"));
     if (!h) {
-      fmt::print(stderr, "palpa bench latency: {}\n", error);
+      fmt::print(stderr, "palpa bench latency: {}\n", h.error());
       return kExitIo;
     }
     if (r == 0) loop.palpad = h->palpad;
-    Merge(loop, *h);
+    loop.Merge(*h);
     std::istringstream ss(h->Palpad("compute_ns"));
     for (long long& c : compute) {
       long long v = 0;
@@ -408,12 +335,12 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
         fmt::print(stderr, "palpa bench latency --with-viewer: {}\n", seg.error);
         return kExitIo;
       }
-      const auto hv = ReadHistogram(path("palpad-viewer.hist"), error);
+      const auto hv = record::ReadLatencyHistogram(path("palpad-viewer.hist"));
       if (!hv) {
-        fmt::print(stderr, "palpa bench latency: {}\n", error);
+        fmt::print(stderr, "palpa bench latency: {}\n", hv.error());
         return kExitIo;
       }
-      Merge(viewed, *hv);
+      viewed.Merge(*hv);
       viewed_overruns += std::atoll(hv->Palpad("overruns").c_str());
       viewer_polls += seg.polls;
       viewer_failed += seg.failed;
@@ -429,10 +356,10 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
     } else if (cc != 0) {
       anchor_note = fmt::format("cyclictest failed (exit {}): {}", cc, Trim(ReadText(path("cyclictest.err"))));
       have_anchor = false;
-    } else if (const auto c = ReadHistogram(path("cyclictest.hist"), error)) {
-      Merge(anchor, *c);
+    } else if (const auto c = record::ReadLatencyHistogram(path("cyclictest.hist"))) {
+      anchor.Merge(*c);
     } else {
-      anchor_note = error;
+      anchor_note = c.error();
       have_anchor = false;
     }
   }
@@ -448,7 +375,7 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
   if (args.with_viewer) PrintRow("palpad + palpa view", viewed);
   if (have_anchor) {
     PrintRow("cyclictest (anchor)", anchor);
-    const std::int64_t a99 = anchor.PercentileUs(0.99), l99 = loop.PercentileUs(0.99);
+    const std::int64_t a99 = anchor.PercentileNs(0.99) / 1000, l99 = loop.PercentileNs(0.99) / 1000;
     if (a99 > 0) {
       fmt::print("  p99 ratio loop / cyclictest: {:.2f} (goal <= 1.5)\n",
                  static_cast<double>(l99) / static_cast<double>(a99));
@@ -474,7 +401,7 @@ int RunBenchLatency(const BenchLatencyArgs& args) {
         viewed_overruns);
     if (!viewer_failure.empty())
       fmt::print("  the viewer's last failed status request (one as palpad exits is expected): {}\n", viewer_failure);
-    const auto p = [](const Histogram& h, double q) { return static_cast<double>(h.PercentileUs(q)); };
+    const auto p = [](const LatencyHistogram& h, double q) { return static_cast<double>(h.PercentileNs(q) / 1000); };
     fmt::print("  with / without viewer: p50 {:.2f}, p99 {:.2f}, max {:.2f}\n",
                p(viewed, 0.5) / std::max(p(loop, 0.5), 1.0), p(viewed, 0.99) / std::max(p(loop, 0.99), 1.0),
                static_cast<double>(viewed.max_ns) / std::max(static_cast<double>(loop.max_ns), 1.0));

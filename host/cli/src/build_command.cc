@@ -11,7 +11,6 @@
 
 #include <fmt/core.h>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "grid_faces.h"
 #include "palpa/blob/blob.h"
@@ -20,6 +19,7 @@
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
 #include "palpa/field/to_blob.h"
+#include "palpa/io/atomic_file.h"
 
 namespace palpa::cli {
 namespace {
@@ -282,7 +282,7 @@ int RunBuild(const BuildArgs& args) {
                                                      {.version = args.format,
                                                       .band_inside = static_cast<std::uint32_t>(args.band_voxels),
                                                       .band_outside = static_cast<std::uint32_t>(args.band_outside)});
-  if (auto w = WriteFileAtomically(args.output, bytes, {args.points}); !w) {
+  if (auto w = io::WriteFileAtomically(args.output, bytes, {.inputs = {args.points}}); !w) {
     fmt::print(stderr, "palpa build: {}\n", w.error());
     return kExitIo;
   }

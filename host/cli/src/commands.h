@@ -15,6 +15,13 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitIo = 1;
 inline constexpr int kExitBadInput = 2;
 
+/// io::CheckOutputTarget for a command, run before any work: prints "palpa COMMAND: <why>" to
+/// stderr and returns the exit code (2: a device, FIFO, socket, directory or an input; 1: the
+/// target cannot be checked), or 0 when `path` may be written. Outputs are then written with
+/// io::AtomicFile or io::WriteFileAtomically (palpa/io/atomic_file.h), which check it again.
+[[nodiscard]] int CheckOutput(const char* command, const std::string& path,
+                              const std::vector<std::string>& inputs = {});
+
 struct BuildArgs {
   std::string points;                ///< .xyz / .pwn / .ply
   std::string output;                ///< FIELD.palpa

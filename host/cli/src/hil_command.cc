@@ -15,13 +15,13 @@
 
 #include <fmt/core.h>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "palpa/hil/field_probe.h"
 #include "palpa/hil/golden.h"
 #include "palpa/hil/report.h"
 #include "palpa/hil/run.h"
 #include "palpa/hil/suite.h"
+#include "palpa/io/atomic_file.h"
 
 namespace palpa::cli {
 namespace {
@@ -31,7 +31,7 @@ namespace fs = std::filesystem;
 constexpr int kExitFailed = 1;  // a replay did not match or broke an invariant
 
 std::expected<void, std::string> WriteText(const fs::path& p, std::string_view text) {
-  return WriteFileAtomically(p.string(), std::as_bytes(std::span(text.data(), text.size())));
+  return io::WriteFileAtomically(p.string(), std::as_bytes(std::span(text.data(), text.size())));
 }
 
 int RunCases(const hil::Harness& h, const HilArgs& args, const std::string& action) {

@@ -7,9 +7,9 @@
 #include <fmt/core.h>
 #include <zstd.h>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "palpa/blob/blob.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/field_file.h"
 
 namespace palpa::cli {
@@ -114,7 +114,7 @@ int RunExport(const std::string& path, const std::string& npy) {
   const auto hlen = static_cast<std::uint16_t>(header.size());
   std::memcpy(head.data() + 8, &hlen, 2);
   std::memcpy(head.data() + 10, header.data(), header.size());
-  auto out = AtomicOutput::Create(npy, {path});
+  auto out = io::AtomicFile::Create(npy, {.inputs = {path}});
   if (!out) {
     fmt::print(stderr, "palpa export: {}\n", out.error());
     return kExitIo;

@@ -3,7 +3,6 @@
 
 #include <fmt/core.h>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "palpa/net/client.h"
 

@@ -6,8 +6,8 @@
 #include <fmt/core.h>
 #include <malloc.h>
 
-#include "atomic_file.h"
 #include "commands.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/field_file.h"
 #include "palpa/mesh/iso_surface.h"
 
@@ -44,7 +44,7 @@ int RunMesh(const MeshArgs& args) {
   std::expected<void, std::string> written;
   if (ext == ".ply") {
     // Streamed: the output is never whole in memory (issue 21).
-    auto out = AtomicOutput::Create(args.output, {args.field});
+    auto out = io::AtomicFile::Create(args.output, {.inputs = {args.field}});
     if (!out) {
       written = std::unexpected(std::move(out.error()));
     } else {
@@ -56,7 +56,7 @@ int RunMesh(const MeshArgs& args) {
     }
   } else {
     const std::string text = mesh::ToObj(*surface);
-    written = WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {args.field});
+    written = io::WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {.inputs = {args.field}});
   }
   if (!written) {
     fmt::print(stderr, "palpa mesh: {}\n", written.error());

@@ -2,8 +2,8 @@
 // known surface for any field method).
 #include <fmt/core.h>
 
-#include "atomic_file.h"
 #include "commands.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/sample.h"
 #include "palpa/mesh/triangle_mesh.h"
 
@@ -24,7 +24,7 @@ int RunSample(const SampleArgs& args) {
     return kExitBadInput;
   }
   const std::string text = mesh::ToXyzText(*points);
-  if (auto w = WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {args.mesh}); !w) {
+  if (auto w = io::WriteFileAtomically(args.output, std::as_bytes(std::span(text)), {.inputs = {args.mesh}}); !w) {
     fmt::print(stderr, "palpa sample: {}\n", w.error());
     return kExitIo;
   }

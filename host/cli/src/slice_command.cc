@@ -1,8 +1,8 @@
 // palpa slice: a colour-mapped cross-section of a field as a PNG.
 #include <fmt/core.h>
 
-#include "atomic_file.h"
 #include "commands.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/field_file.h"
 #include "palpa/mesh/slice.h"
 
@@ -21,7 +21,7 @@ int RunSlice(const SliceArgs& args) {
     fmt::print(stderr, "palpa slice: {}: {}\n", args.field, image.error().message);
     return kExitBadInput;
   }
-  if (auto w = WriteFileAtomically(args.output, mesh::EncodePng(*image), {args.field}); !w) {
+  if (auto w = io::WriteFileAtomically(args.output, mesh::EncodePng(*image), {.inputs = {args.field}}); !w) {
     fmt::print(stderr, "palpa slice: {}\n", w.error());
     return kExitIo;
   }

@@ -26,9 +26,9 @@
 #include <fmt/ranges.h>
 #include <Eigen/Geometry>
 
-#include "atomic_file.h"
 #include "commands.h"
 #include "palpa/blob/blob.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/field_sampler.h"
 #include "palpa/trace/trace.h"
 
@@ -629,7 +629,9 @@ int RunTraceSynth(const TraceSynthArgs& a) {
   } else {
     out = trace::FormatTrace(samples, comment);
   }
-  if (auto w = WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size())), {a.field}); !w) {
+  if (auto w =
+          io::WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size())), {.inputs = {a.field}});
+      !w) {
     fmt::print(stderr, "palpa trace synth: {}\n", w.error());
     return kExitIo;
   }
@@ -724,7 +726,7 @@ int RunTraceImport(const TraceImportArgs& a) {
   } else {
     out = trace::FormatTrace(rows, comment);
   }
-  if (auto w = WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size()))); !w) {
+  if (auto w = io::WriteFileAtomically(a.output, std::as_bytes(std::span(out.data(), out.size()))); !w) {
     fmt::print(stderr, "palpa trace import: {}\n", w.error());
     return kExitIo;
   }

@@ -11,9 +11,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <span>
 #include <string_view>
 #include <vector>
 
+#include "palpa/io/atomic_file.h"
 #include "palpa/io/escape.h"
 #include "palpa/net/socket.h"
 
@@ -261,20 +263,17 @@ std::expected<void, NetError> WriteNewKeyFile(const std::string& path, bool forc
   if (!InitCrypto()) return fail("libsodium could not initialise");
   struct stat st {};
   if (!force && lstat(path.c_str(), &st) == 0) return fail("exists; refusing to overwrite a key (--force replaces it)");
+  // Created 0600 (never readable by others, not even as the temporary) and unbuffered, so that
+  // no stdio buffer keeps a copy of the key after it is zeroed.
+  auto file = io::AtomicFile::Create(path, {.mode = 0600});
+  if (!file) return std::unexpected(Err(NetErrorCode::kKeyFile, std::move(file.error())));
+  std::setvbuf(file->file(), nullptr, _IONBF, 0);
   Key k;
   randombytes_buf(k.bytes.data(), k.bytes.size());
-  const std::string temp = path + ".tmp" + std::to_string(getpid());
-  const int fd = open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
-  if (fd < 0) return fail(std::string("cannot create ") + temp + ": " + std::strerror(errno));
-  bool ok = fchmod(fd, 0600) == 0 &&
-            write(fd, k.bytes.data(), k.bytes.size()) == static_cast<ssize_t>(k.bytes.size()) && fsync(fd) == 0;
-  ok = close(fd) == 0 && ok;
+  auto written = file->Append(std::as_bytes(std::span(k.bytes)));
   sodium_memzero(k.bytes.data(), k.bytes.size());
-  if (!ok || rename(temp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    unlink(temp.c_str());
-    return fail("cannot write key file: " + why);
-  }
+  if (written) written = file->Commit();
+  if (!written) return std::unexpected(Err(NetErrorCode::kKeyFile, std::move(written.error())));
   return {};
 }
 

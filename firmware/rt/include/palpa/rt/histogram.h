@@ -4,39 +4,20 @@
 // Bin convention (the one cyclictest's -h histogram uses, so the two compare directly): bin i
 // counts values in [i·bin, (i+1)·bin); a percentile is reported as its bin's lower edge, i.e.
 // truncated to the bin width. Values ≥ kBins·bin go to an overflow count; min/max are exact.
+// Percentiles follow the run record's one definition (record::PercentileOfBins), which palpa bench
+// latency applies to the histogram files.
 #pragma once
 
 #include <algorithm>
 #include <array>
-#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <span>
 
-namespace palpa::rt {
+#include "palpa/record/latency_histogram.h"
 
-/// Nearest-rank percentile over binned counts: the lower edge (bin index · bin_ns) of the first
-/// bin at which the running count reaches ceil(q·n), n = Σbins + overflow. If that rank lies in
-/// the overflow, returns `overflow_value_ns` (callers pass the exact maximum: an upper bound).
-/// q is clamped to [0, 1]; returns 0 when n = 0. Shared by palpa's histogram and the parser of
-/// cyclictest's, so both sides of a comparison use one definition.
-template <typename Count>
-std::int64_t PercentileOfBins(std::span<const Count> bins, std::uint64_t overflow, std::int64_t bin_ns, double q,
-                              std::int64_t overflow_value_ns) {
-  std::uint64_t n = overflow;
-  for (const Count c : bins) n += c;
-  if (n == 0) return 0;
-  const double qc = std::clamp(q, 0.0, 1.0);
-  auto rank = static_cast<std::uint64_t>(std::ceil(qc * static_cast<double>(n)));
-  rank = std::clamp<std::uint64_t>(rank, 1, n);
-  std::uint64_t seen = 0;
-  for (std::size_t i = 0; i < bins.size(); ++i) {
-    seen += bins[i];
-    if (seen >= rank) return static_cast<std::int64_t>(i) * bin_ns;
-  }
-  return overflow_value_ns;
-}
+namespace palpa::rt {
 
 /// kBins bins of kBinNs nanoseconds each. Counts are 32-bit and saturate (2^32 ticks is 5 days at
 /// 10 kHz); the total, min, max and sum are 64-bit. RT-safe: Add is O(1), no allocation.
@@ -73,10 +54,10 @@ class LinearHistogram {
   double mean_ns() const { return count_ == 0 ? 0.0 : static_cast<double>(sum_ns_) / static_cast<double>(count_); }
   std::span<const std::uint32_t> bins() const { return bins_; }
 
-  /// Nearest-rank percentile, ns, as PercentileOfBins (bin lower edge; the exact max if the rank
-  /// is in the overflow). Non-RT by use (O(kBins)), allocation-free.
+  /// Nearest-rank percentile, ns, as record::PercentileOfBins (bin lower edge; the exact max if the
+  /// rank is in the overflow). Non-RT by use (O(kBins)), allocation-free.
   std::int64_t PercentileNs(double q) const {
-    return PercentileOfBins<std::uint32_t>(bins_, overflow_, kBinNs, q, max_ns_);
+    return record::PercentileOfBins<std::uint32_t>(bins_, overflow_, kBinNs, q, max_ns_);
   }
 
  private:

@@ -23,41 +23,11 @@ using record::WriteCsvRow;
 /// → same bytes. False on an I/O error.
 bool WriteCsv(std::FILE* out, std::span<const LogRow> rows);
 
-/// A file written under a temporary name in the target's directory and renamed over the target
-/// only by Commit(), after fsync: readers see the old file or the complete new one, never a part.
-/// Destroying an uncommitted AtomicFile removes the temporary file; a fatal signal removes it too
-/// (its name is in palpa/rt/temp_registry.h while it exists).
-class AtomicFile {
- public:
-  /// Creates `<path>.tmp.XXXXXX` (mode 0666 minus umask), open for writing and reading back.
-  /// Error: a sentence naming the path (a target that is a device, FIFO, socket or directory too).
-  static std::expected<AtomicFile, std::string> Create(const std::string& path);
-
-  AtomicFile(AtomicFile&& other) noexcept;
-  AtomicFile& operator=(AtomicFile&&) = delete;
-  AtomicFile(const AtomicFile&) = delete;
-  AtomicFile& operator=(const AtomicFile&) = delete;
-  ~AtomicFile();
-
-  std::FILE* file() const { return file_; }
-  /// Flushes, fsyncs, closes and renames onto the target, then fsyncs the directory. Errors name
-  /// the path; on error the temporary is removed and the target left as it was.
-  std::expected<void, std::string> Commit();
-
- private:
-  AtomicFile(std::string path, std::string temp_path, std::FILE* file, int temp_slot)
-      : path_(std::move(path)), temp_path_(std::move(temp_path)), file_(file), temp_slot_(temp_slot) {}
-
-  std::string path_;
-  std::string temp_path_;
-  std::FILE* file_ = nullptr;
-  int temp_slot_ = -1;  // rt::RegisterTempPath slot of temp_path_
-};
-
-/// WriteCsv through an AtomicFile.
+/// WriteCsv through an io::AtomicFile (palpa/io/atomic_file.h): the target is replaced whole or
+/// not at all. Error: a sentence naming the path.
 std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::span<const LogRow> rows);
 
-/// Percentiles of one histogram, ns (nearest rank, bin lower edge; see palpa/rt/histogram.h).
+/// Percentiles of one histogram, ns (nearest rank, bin lower edge; record::PercentileOfBins).
 struct LatencyFigures {
   std::uint64_t count = 0;
   std::int64_t min_ns = 0;
@@ -124,12 +94,10 @@ std::string SummaryText(const ServoSummary& s);
 /// rt_refused, end, fault.
 std::string SummaryJson(const ServoSummary& s);
 
-/// The wake-up latency histogram in cyclictest's histogram file layout (rt-tests `-h US
-/// --histfile`): "%06d %06d" per 1 µs bin up to the last non-empty one, then "# Total:",
-/// "# Min Latencies:", "# Avg Latencies:", "# Max Latencies:" (µs, truncated),
-/// "# Histogram Overflows:"; then palpad's own "# palpad <key>: <value>" lines: max_ns, compute_ns
-/// (p50 p99 p999 max), overruns, max_consecutive_overruns, dropped_rows, rate_hz, realtime,
-/// rt_refused. The same parser reads palpad's and cyclictest's files (palpa bench latency).
+/// The wake-up latency histogram file (record::FormatLatencyHistogram: cyclictest's histogram file
+/// layout) with palpad's own "# palpad <key>: <value>" lines: max_ns, compute_ns (p50 p99 p999
+/// max), overruns, max_consecutive_overruns, dropped_rows, rate_hz, realtime, rt_refused. One
+/// parser reads palpad's and cyclictest's files (record::ReadLatencyHistogram, palpa bench latency).
 std::string LatencyHistogramText(const WakeLatencyHistogram& h, const ServoSummary& s);
 
 /// `s` as a JSON string literal (quotes, backslashes and control characters escaped).

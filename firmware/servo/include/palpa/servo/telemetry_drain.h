@@ -2,8 +2,8 @@
 // output CSV as the run goes (so long runs need no log in memory) and keeps a live status, written
 // as JSON once a second (house style §3b, §5).
 //
-// Status file (--status PATH), replaced atomically (temporary file + rename; no fsync, it is a
-// live view — put it on tmpfs, e.g. /run/palpa/status.json):
+// Status file (--status PATH), replaced atomically (io::WriteFileAtomically: temporary file +
+// rename; no fsync, it is a live view — put it on tmpfs, e.g. /run/palpa/status.json):
 //   {"state": "running"|<how the run ended>, "realtime": bool, "realtime_requested": bool,
 //    "rt_refused": "...", "rate_hz": R, "fast": bool, "samples": N, "dropped": N, "last_tick": N,
 //    "t_s": T, "contact_ticks": N, "estop": bool, "estop_ticks": N, "overruns": N,

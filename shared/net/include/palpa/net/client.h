@@ -95,7 +95,8 @@ struct Key {
 /// other permission bits (mode 0600 or stricter). Errors (kKeyFile) name the file and the fault.
 [[nodiscard]] std::expected<Key, NetError> ReadKeyFile(const std::string& path);
 /// Writes 32 random bytes (libsodium randombytes_buf) to `path` with mode 0600, atomically
-/// (temporary file, fsync, rename). Refuses an existing path unless `force`. Errors: kKeyFile.
+/// (io::AtomicFile: temporary file, fsync, rename). Refuses an existing path unless `force`, and a
+/// device, FIFO or directory always. Errors: kKeyFile.
 [[nodiscard]] std::expected<void, NetError> WriteNewKeyFile(const std::string& path, bool force);
 
 /// Fetches the controller's status. Bounded by `timeout` overall (connect + exchange).

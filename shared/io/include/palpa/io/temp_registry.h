@@ -1,14 +1,15 @@
 // A fixed-size registry of temporary file paths that a fatal-signal handler can unlink
-// (issue 18, docs/runtime.md "Fault-injection table"). Writers (AtomicFile, palpad's recorder,
-// the status file) register their `<path>.tmp…` name when they create it and unregister it once
-// it is renamed or removed; a crash handler calls UnlinkRegisteredTempPaths, which only reads
-// fixed arrays and calls unlink(2), both async-signal-safe.
+// (issue 18, docs/runtime.md "Fault-injection table"; in shared/io since issue 21, beside the
+// writer that fills it). Every io::AtomicFile registers its `<path>.tmp.XXXXXX` name when it
+// creates it and unregisters it once it is renamed or removed; palpad's crash handler calls
+// UnlinkRegisteredTempPaths, which only reads fixed arrays and calls unlink(2), both
+// async-signal-safe.
 //
 // Thread rules: Register/Unregister from any non-RT thread (lock-free, no allocation);
 // UnlinkRegisteredTempPaths from a signal handler or any thread.
 #pragma once
 
-namespace palpa::rt {
+namespace palpa::io {
 
 /// Slots in the registry: palpad has at most 6 temporaries at once (--out, --summary-json,
 /// --latency-histogram, --status, --record, --record-timing).
@@ -24,4 +25,4 @@ void UnregisterTempPath(int slot) noexcept;
 /// unlink(2) of every registered path; returns how many were unlinked. Async-signal-safe.
 int UnlinkRegisteredTempPaths() noexcept;
 
-}  // namespace palpa::rt
+}  // namespace palpa::io

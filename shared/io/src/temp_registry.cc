@@ -1,11 +1,11 @@
-#include "palpa/rt/temp_registry.h"
+#include "palpa/io/temp_registry.h"
 
 #include <unistd.h>
 
 #include <atomic>
 #include <cstring>
 
-namespace palpa::rt {
+namespace palpa::io {
 namespace {
 
 enum SlotState : int { kFree = 0, kFilling = 1, kInUse = 2 };
@@ -47,4 +47,4 @@ int UnlinkRegisteredTempPaths() noexcept {
   return unlinked;
 }
 
-}  // namespace palpa::rt
+}  // namespace palpa::io
