@@ -1,5 +1,7 @@
 #include "palpa/hil/timing.h"
 
+#include "palpa/record/latency_histogram.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -14,12 +16,8 @@ std::vector<TimingRow> ReadTiming(const std::filesystem::path& p) {
   std::string line;
   std::getline(in, line);  // header
   while (std::getline(in, line)) {
-    unsigned long long tick = 0;
-    double t = 0;
-    long long w = 0, c = 0, tot = 0;
-    unsigned flags = 0;
-    if (std::sscanf(line.c_str(), "%llu,%lf,%lld,%lld,%lld,%u", &tick, &t, &w, &c, &tot, &flags) == 6)
-      rows.push_back({w, c, tot, flags});
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (auto row = record::ParseTimingRow(line)) rows.push_back(*row);
   }
   return rows;
 }
@@ -28,16 +26,13 @@ Percentiles Figures(std::vector<std::int64_t> ns) {
   Percentiles p;
   std::erase_if(ns, [](std::int64_t v) { return v < 0; });
   if (ns.empty()) return p;
-  std::sort(ns.begin(), ns.end());
-  auto rank = [&](double q) {  // nearest rank
-    const auto r = static_cast<std::size_t>(std::ceil(q * static_cast<double>(ns.size())));
-    return static_cast<double>(ns[std::min(ns.size(), std::max<std::size_t>(r, 1)) - 1]) / 1e3;
-  };
+  // The run record's nearest rank (record::PercentileOfSamples), in µs.
+  const auto us = [&](double q) { return static_cast<double>(record::PercentileOfSamples(ns, q)) / 1e3; };
   p.count = ns.size();
-  p.p50 = rank(0.5);
-  p.p99 = rank(0.99);
-  p.p999 = rank(0.999);
-  p.max = static_cast<double>(ns.back()) / 1e3;
+  p.p50 = us(0.5);
+  p.p99 = us(0.99);
+  p.p999 = us(0.999);
+  p.max = static_cast<double>(*std::max_element(ns.begin(), ns.end())) / 1e3;
   return p;
 }
 

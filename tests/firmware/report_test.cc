@@ -10,15 +10,6 @@
 namespace palpa::servo {
 namespace {
 
-TEST(Report, PercentileIsNearestRank) {
-  const std::vector<std::int64_t> ns = {50, 10, 40, 20, 30, 100, 90, 80, 70, 60};
-  EXPECT_EQ(PercentileNs(ns, 0.5), 50);
-  EXPECT_EQ(PercentileNs(ns, 0.99), 100);
-  EXPECT_EQ(PercentileNs(ns, 0.9), 90);
-  EXPECT_EQ(PercentileNs(ns, 0.0), 10);
-  EXPECT_EQ(PercentileNs({}, 0.5), 0);
-}
-
 TEST(Report, CsvRowsRoundTripQ16Values) {
   LogRow row;
   row.t_s = 1.234;

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "palpa/device_sim/sim_device.h"
+#include "palpa/record/latency_histogram.h"
 #include "palpa/servo/report.h"
 #include "sphere_fixture.h"
 
@@ -193,7 +194,8 @@ TEST(ServoLoop, TickTimingOnTheSphere) {
       "%lld ns\n",
       static_cast<unsigned long long>(s.ticks), static_cast<unsigned long long>(s.contact_ticks),
       static_cast<long long>(s.median_tick_ns), static_cast<long long>(s.p99_tick_ns),
-      static_cast<long long>(PercentileNs(contact_ns, 0.5)), static_cast<long long>(PercentileNs(contact_ns, 0.99)));
+      static_cast<long long>(record::PercentileOfSamples(contact_ns, 0.5)),
+      static_cast<long long>(record::PercentileOfSamples(contact_ns, 0.99)));
   EXPECT_GT(s.median_tick_ns, 0);
   EXPECT_LE(s.median_tick_ns, s.p99_tick_ns);
   EXPECT_LT(s.median_tick_ns, 1'000'000) << "a tick must fit a 1 kHz period";

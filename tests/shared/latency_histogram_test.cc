@@ -15,6 +15,20 @@
 namespace palpa::record {
 namespace {
 
+TEST(LatencyHistogram, SamplePercentileIsTheSameNearestRank) {
+  const std::vector<std::int64_t> ns = {50, 10, 40, 20, 30, 100, 90, 80, 70, 60};
+  EXPECT_EQ(PercentileOfSamples(ns, 0.5), 50);
+  EXPECT_EQ(PercentileOfSamples(ns, 0.99), 100);
+  EXPECT_EQ(PercentileOfSamples(ns, 0.9), 90);
+  EXPECT_EQ(PercentileOfSamples(ns, 0.0), 10);
+  EXPECT_EQ(PercentileOfSamples({}, 0.5), 0);
+  // The samples binned at 10 ns give the same ranks (lower edges = the values here).
+  std::vector<std::uint32_t> bins(11, 0);
+  for (const std::int64_t v : ns) ++bins[static_cast<std::size_t>(v / 10)];
+  for (const double q : {0.0, 0.1, 0.35, 0.5, 0.9, 0.99, 1.0})
+    EXPECT_EQ(PercentileOfBins<std::uint32_t>(bins, 0, 10, q, 0), PercentileOfSamples(ns, q)) << q;
+}
+
 std::string TempFile(const std::string& name, const std::string& text) {
   const std::string path = ::testing::TempDir() + "/palpa_hist_" + std::to_string(::getpid()) + "_" + name;
   std::ofstream(path, std::ios::binary) << text;

@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "palpa/io/atomic_file.h"
+#include "palpa/record/run_record.h"
 #include "palpa/servo/telemetry_drain.h"
 #include "palpa/trace/trace.h"
 
@@ -44,8 +45,7 @@ class Recorder final : public servo::TelemetrySink {
       if (!f) return std::unexpected(f.error());
       r->timing_.emplace(std::move(*f));
       r->timing_path_ = timing_path;
-      if (std::fputs("tick,t_s,wake_ns,compute_ns,total_ns,flags\n", r->timing_->file()) < 0)
-        return std::unexpected("cannot write " + timing_path);
+      if (!record::WriteTimingHeader(r->timing_->file())) return std::unexpected("cannot write " + timing_path);
     }
     return r;
   }
@@ -61,12 +61,10 @@ class Recorder final : public servo::TelemetrySink {
     ++samples_;
     if (writer_) (void)writer_->Add({s.row.t_s, s.row.hip_m, s.buttons});
     if (timing_ && !timing_failed_) {
-      // total: deadline to force written (paced), or the compute time alone (fast, no deadline).
-      const std::int64_t total = s.wake_latency_ns >= 0 ? s.wake_latency_ns + s.compute_ns : s.compute_ns;
-      if (std::fprintf(timing_->file(), "%llu,%.9f,%lld,%lld,%lld,%u\n", static_cast<unsigned long long>(s.tick),
-                       s.row.t_s, static_cast<long long>(s.wake_latency_ns), static_cast<long long>(s.compute_ns),
-                       static_cast<long long>(total), s.flags) < 0)
-        timing_failed_ = true;
+      const record::TimingRow row{
+          s.tick, s.row.t_s, s.wake_latency_ns, s.compute_ns, record::TotalNs(s.wake_latency_ns, s.compute_ns),
+          s.flags};
+      if (!record::WriteTimingRow(timing_->file(), row)) timing_failed_ = true;
     }
   }
 

@@ -44,17 +44,6 @@ std::expected<void, std::string> WriteCsvAtomic(const std::string& path, std::sp
   return file->Commit();
 }
 
-std::int64_t PercentileNs(std::span<const std::int64_t> ns, double q) {
-  if (ns.empty()) return 0;
-  std::vector<std::int64_t> copy(ns.begin(), ns.end());
-  // Nearest rank: the smallest value with at least q·n values ≤ it.
-  const double rank = std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(copy.size()));
-  std::size_t index = rank < 1 ? 0 : static_cast<std::size_t>(rank) - 1;
-  index = std::min(index, copy.size() - 1);
-  std::nth_element(copy.begin(), copy.begin() + static_cast<std::ptrdiff_t>(index), copy.end());
-  return copy[index];
-}
-
 ServoSummary Summarize(const ServoLoop& loop, bool fast, double rate_hz) {
   const ServoCounters& c = loop.counters();
   ServoSummary s;

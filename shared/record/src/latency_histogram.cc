@@ -112,4 +112,13 @@ std::expected<LatencyHistogram, std::string> ReadLatencyHistogram(const std::str
   return h;
 }
 
+std::int64_t PercentileOfSamples(std::span<const std::int64_t> ns, double q) {
+  if (ns.empty()) return 0;
+  std::vector<std::int64_t> copy(ns.begin(), ns.end());
+  const double rank = std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(copy.size()));
+  const std::size_t index = std::min(rank < 1 ? 0 : static_cast<std::size_t>(rank) - 1, copy.size() - 1);
+  std::nth_element(copy.begin(), copy.begin() + static_cast<std::ptrdiff_t>(index), copy.end());
+  return copy[index];
+}
+
 }  // namespace palpa::record

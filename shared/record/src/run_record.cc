@@ -50,4 +50,52 @@ std::expected<LogRow, std::string> ParseCsvRow(std::string_view line) {
   return r;
 }
 
+bool WriteTimingHeader(std::FILE* out) {
+  return std::fprintf(out, "%.*s\n", static_cast<int>(kTimingCsvHeader.size()), kTimingCsvHeader.data()) >= 0;
+}
+
+bool WriteTimingRow(std::FILE* out, const TimingRow& r) {
+  return std::fprintf(out, "%llu,%.9f,%lld,%lld,%lld,%u\n", static_cast<unsigned long long>(r.tick), r.t_s,
+                      static_cast<long long>(r.wake_ns), static_cast<long long>(r.compute_ns),
+                      static_cast<long long>(r.total_ns), r.flags) >= 0;
+}
+
+std::expected<TimingRow, std::string> ParseTimingRow(std::string_view line) {
+  TimingRow r;
+  const char* p = line.data();
+  const char* end = line.data() + line.size();
+  for (std::size_t c = 0; c < kTimingCsvColumns; ++c) {
+    const char* stop = std::find(p, end, ',');
+    if ((c + 1 < kTimingCsvColumns) != (stop != end))
+      return std::unexpected(std::string("expected 6 comma-separated fields"));
+    std::from_chars_result got{};
+    switch (c) {
+      case 0:
+        got = std::from_chars(p, stop, r.tick);
+        break;
+      case 1:
+        got = std::from_chars(p, stop, r.t_s);
+        break;
+      case 2:
+        got = std::from_chars(p, stop, r.wake_ns);
+        break;
+      case 3:
+        got = std::from_chars(p, stop, r.compute_ns);
+        break;
+      case 4:
+        got = std::from_chars(p, stop, r.total_ns);
+        break;
+      default:
+        got = std::from_chars(p, stop, r.flags);
+        break;
+    }
+    if (got.ec != std::errc{} || got.ptr != stop || (c == 1 && !std::isfinite(r.t_s)))
+      return std::unexpected("field " + std::to_string(c + 1) + " '" +
+                             io::Escape(std::string_view(p, static_cast<std::size_t>(stop - p))) + "' is not " +
+                             (c == 1 ? "a finite number" : "an integer"));
+    p = stop == end ? end : stop + 1;
+  }
+  return r;
+}
+
 }  // namespace palpa::record

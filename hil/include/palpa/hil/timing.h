@@ -8,16 +8,15 @@
 #include <filesystem>
 #include <vector>
 
+#include "palpa/record/run_record.h"
+
 namespace palpa::hil {
 
-/// One timing row. ns; wake_ns −1 where there is no deadline (fast mode, the first tick).
-struct TimingRow {
-  std::int64_t wake_ns = -1, compute_ns = 0, total_ns = 0;
-  std::uint32_t flags = 0;  ///< record::TelemetryFlag bits
-};
+/// One timing row (the run record's: record::TimingRow).
+using TimingRow = record::TimingRow;
 
-/// The rows of a timing CSV after its header; lines that do not hold six numbers are skipped, a
-/// missing file is no rows (a case's `output` has none).
+/// The rows of a timing CSV after its header (record::ParseTimingRow); lines that do not parse
+/// are skipped, a missing file is no rows (a case's `output` has none).
 [[nodiscard]] std::vector<TimingRow> ReadTiming(const std::filesystem::path& p);
 
 /// Nearest-rank percentiles of a set of durations, µs.

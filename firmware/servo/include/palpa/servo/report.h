@@ -74,9 +74,6 @@ struct ServoSummary {
   std::string rt_refused;
 };
 
-/// Nearest-rank percentile (q in [0, 1]) of `ns` by nth_element on a copy; 0 for an empty span.
-std::int64_t PercentileNs(std::span<const std::int64_t> ns, double q);
-
 /// Counters and histograms of `loop`; the caller fills end, watchdog_trips and the RT fields.
 ServoSummary Summarize(const ServoLoop& loop, bool fast, double rate_hz);
 

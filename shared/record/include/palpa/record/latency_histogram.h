@@ -24,6 +24,10 @@ namespace palpa::record {
 /// the overflow, returns `overflow_value_ns` (callers pass the exact maximum: an upper bound).
 /// q is clamped to [0, 1]; returns 0 when n = 0. Shared by the servo loop's histograms and the
 /// parser of the histogram files, so both sides of a comparison use one definition.
+/// The same nearest rank over raw samples: the smallest value with at least ceil(q·n) values ≤ it
+/// (q clamped to [0, 1], rank at least 1); 0 when there are none. Non-RT (sorts a copy).
+std::int64_t PercentileOfSamples(std::span<const std::int64_t> ns, double q);
+
 template <typename Count>
 std::int64_t PercentileOfBins(std::span<const Count> bins, std::uint64_t overflow, std::int64_t bin_ns, double q,
                               std::int64_t overflow_value_ns) {

@@ -55,4 +55,37 @@ bool WriteCsvRow(std::FILE* out, const LogRow& row);
 /// for the caller to prefix with the file and line.
 std::expected<LogRow, std::string> ParseCsvRow(std::string_view line);
 
+// ---- The timing record (palpad --record-timing): one row per tick, the wall-clock side ----
+
+/// Timing CSV column line. Columns: tick number, device time s, wake latency ns (−1: no deadline,
+/// fast mode or the first tick), compute ns (read → force written), total ns, flags
+/// (TelemetryFlag bits).
+inline constexpr std::string_view kTimingCsvHeader = "tick,t_s,wake_ns,compute_ns,total_ns,flags";
+inline constexpr std::size_t kTimingCsvColumns = 6;
+
+/// One tick of the timing record.
+struct TimingRow {
+  std::uint64_t tick = 0;
+  double t_s = 0;               ///< device time of the HIP sample, s
+  std::int64_t wake_ns = -1;    ///< deadline to wake-up; −1 where there is no deadline
+  std::int64_t compute_ns = 0;  ///< wake-up (or read) to force written
+  std::int64_t total_ns = 0;    ///< TotalNs(wake_ns, compute_ns)
+  std::uint32_t flags = 0;      ///< TelemetryFlag bits
+};
+static_assert(std::is_trivially_copyable_v<TimingRow>);
+
+/// A tick's total: deadline to force written when paced (wake + compute), else compute alone.
+constexpr std::int64_t TotalNs(std::int64_t wake_ns, std::int64_t compute_ns) {
+  return wake_ns >= 0 ? wake_ns + compute_ns : compute_ns;
+}
+
+/// The timing header line alone.
+bool WriteTimingHeader(std::FILE* out);
+/// One timing row: integers exactly, t_s with %.9f. Same row → same bytes. False on an I/O error.
+bool WriteTimingRow(std::FILE* out, const TimingRow& row);
+/// One timing data row (no line end) back: kTimingCsvColumns comma-separated numbers, the
+/// integers exact. Error: a sentence naming the field, for the caller to prefix with the file and
+/// line.
+std::expected<TimingRow, std::string> ParseTimingRow(std::string_view line);
+
 }  // namespace palpa::record
