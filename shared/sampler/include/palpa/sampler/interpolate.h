@@ -14,14 +14,18 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 namespace palpa::sampler {
 
 /// A position in grid coordinates, Q16.16 voxel units: node (i,j,k) is at (i,j,k)·65536.
+/// A type of its own (not three loose ints, nor metres): the proxy's API passes positions as it;
+/// the components stay raw Q16.16 because every hot function reads them so.
 struct GridPos {
   std::int32_t x = 0, y = 0, z = 0;
   friend constexpr bool operator==(GridPos, GridPos) = default;
 };
+static_assert(sizeof(GridPos) == 12 && std::is_trivially_copyable_v<GridPos>);  // three registers, no cost
 
 /// φ and its gradient at a point. φ in Q16.16 voxel units (negative inside); gradient
 /// ∂φ/∂(x,y,z) in Q16.16 (voxel per voxel, dimensionless).
