@@ -186,6 +186,8 @@ class TrilinearSampler {
   std::int32_t Phi(GridPos p) const {
     return Visit([p](const auto& s) { return s.Phi(p); });
   }
+  std::int32_t Phi(std::int32_t x, std::int32_t y, std::int32_t z) const { return Phi(GridPos{x, y, z}); }
+  Sample At(std::int32_t x, std::int32_t y, std::int32_t z) const { return At(GridPos{x, y, z}); }
   Sample At(GridPos p) const {
     return Visit([p](const auto& s) { return s.At(p); });
   }
