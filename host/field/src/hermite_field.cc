@@ -117,6 +117,28 @@ class CrossingResult {
   std::vector<std::size_t>& out_;
 };
 
+// nanoflann result set: is any sample within `radius` of the query (sqrt(d^2) <= radius, the test
+// the nearest sample's distance would take)? The search stops at the first; the bound the tree
+// prunes with is a little wider than radius^2, so that none is missed by rounding.
+class AnyWithin {
+ public:
+  explicit AnyWithin(double radius) : radius_(radius), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+  void init() {}
+  void clear() {}
+  std::size_t size() const { return found_ ? 1 : 0; }
+  bool full() const { return true; }
+  double worstDist() const { return bound_sq_; }
+  bool addPoint(double dist_sq, std::size_t /*j*/) {
+    found_ = std::sqrt(dist_sq) <= radius_;
+    return !found_;
+  }
+  bool found() const { return found_; }
+
+ private:
+  double radius_, bound_sq_;
+  bool found_ = false;
+};
+
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -895,10 +917,16 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
+    // The trilinear filter's weight along the last axis: 1 - t at corners q with bit 0 clear.
+    std::array<std::array<float, kB>, 2> t_weight{};
+    for (std::size_t e = 0; e < kB; ++e) {
+      const float t = static_cast<float>(e) / kB;
+      t_weight[0][e] = 1.0f - t;
+      t_weight[1][e] = t;
+    }
     // A brick's nodes that need w (the filters below), then w for all of them in one batch.
     std::vector<int> node;
     std::vector<V3> at;
-    std::vector<double> dist;
     std::vector<double> wn;
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = evaluated[m];
@@ -907,38 +935,41 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       float* values = field.BrickValues(b);
       node.clear();
       at.clear();
-      dist.clear();
       for (int a = 0; a < kB; ++a)
-        for (int c = 0; c < kB; ++c)
+        for (int c = 0; c < kB; ++c) {
+          // Trilinear w from the brick corners: a cheap first filter (exact w below). The sum over
+          // the corners q in order of ((w_q u_q) v_q) t_q, its first two factors once a row.
+          const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB;
+          std::array<float, 8> row{};
+          for (std::size_t q = 0; q < 8; ++q)
+            row[q] = cw[q] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
+          std::array<float, kB> wi{};
+          for (std::size_t q = 0; q < 8; ++q)
+            for (std::size_t e = 0; e < kB; ++e) wi[e] += row[q] * t_weight[q & 1][e];
           for (int e = 0; e < kB; ++e) {
             const float x = values[(a * kB + c) * kB + e];
-            // Trilinear w from the brick corners: a cheap first filter (exact w below).
-            const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB, t = static_cast<float>(e) / kB;
-            float wi = 0.0f;
-            for (int q = 0; q < 8; ++q)
-              wi += cw[static_cast<std::size_t>(q)] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v) *
-                    ((q & 1) != 0 ? t : 1.0f - t);
-            if ((wi >= 0.5f) == (x <= 0.0f)) continue;
+            if ((wi[static_cast<std::size_t>(e)] >= 0.5f) == (x <= 0.0f)) continue;
             const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
-            std::size_t idx = 0;
-            double d2 = 0.0;
-            tree.knnSearch(p.data(), 1, &idx, &d2);
-            const double ds = std::sqrt(d2);
-            if (ds <= trust) continue;
+            AnyWithin near(trust);  // the nearest sample within trust?
+            tree.findNeighbors(near, p.data(), nanoflann::SearchParams());
+            if (near.found()) continue;
             node.push_back((a * kB + c) * kB + e);
             at.push_back(p);
-            dist.push_back(ds);
           }
+        }
       wn.resize(at.size());
       winding(at, wn);
       for (std::size_t f = 0; f < node.size(); ++f) {
         const int a = node[f] / (kB * kB), c = node[f] / kB % kB, e = node[f] % kB;
         float& x = values[node[f]];
         const V3& p = at[f];
-        const double ds = dist[f];
         const double w = wn[f];
         if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
         if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
+        std::size_t idx = 0;
+        double d2 = 0.0;
+        tree.knnSearch(p.data(), 1, &idx, &d2);
+        const double ds = std::sqrt(d2);
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
         ++local;
