@@ -109,8 +109,8 @@ TEST(WindingNumber, KittenTreeMatchesBruteForce) {
   EXPECT_NEAR(w(lo - (hi - lo)), 0.0, 0.01);
 }
 
-// The batch evaluation (one walk of the tree for a set of queries, two far-field terms at a time)
-// gives each query the single evaluation's value to the bit: the build's labels depend on it.
+// The batch evaluation (one walk of the tree for a set of queries, two or four far-field terms at
+// a time) gives each query the single evaluation's value to the bit: the build's labels depend on it.
 // Queries in clusters (a brick's nodes, as the build asks), on the samples themselves (the
 // dipole's 0) and scattered over and beyond the bounding box; odd and even set sizes.
 TEST(WindingNumber, BatchIsTheSingleEvaluationBitForBit) {
@@ -130,12 +130,15 @@ TEST(WindingNumber, BatchIsTheSingleEvaluationBitForBit) {
     for (std::size_t i = 0; i < count; ++i)
       q.push_back(centre + reach * V3(unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5));
     if (set % 4 == 1) q.push_back(pts->positions[static_cast<std::size_t>(set) * 83 % pts->positions.size()]);
-    std::vector<double> batch(q.size());
-    w(q, batch);
+    std::vector<double> batch(q.size()), two(q.size());
+    w(q, batch);              // four lanes where the CPU has AVX2
+    w.BatchTwoLanes(q, two);  // the portable path
     for (std::size_t i = 0; i < q.size(); ++i) {
       const double single = w(q[i]);
       ASSERT_EQ(std::memcmp(&single, &batch[i], sizeof(double)), 0)
           << "set " << set << " query " << i << ": " << single << " vs " << batch[i];
+      ASSERT_EQ(std::memcmp(&single, &two[i], sizeof(double)), 0)
+          << "set " << set << " query " << i << ": " << single << " vs " << two[i] << " (two lanes)";
       ++compared;
     }
   }

@@ -27,8 +27,98 @@ inline double Dipole(const V3& at, const V3& weighted_normal, const V3& q) {
   return weighted_normal.dot(d) * kInv4Pi / (r2 * std::sqrt(r2));
 }
 
-// Two lanes of doubles: each lane's arithmetic is the scalar operation (IEEE, no contraction).
-using V2 = double __attribute__((vector_size(16)));
+// One node's far-field term at q, d2 = |centre - q|^2 (winding.h).
+inline double FarTerm(const V3& centre, const V3& dipole, double trace, const Eigen::Matrix3d& second, const V3& q,
+                      double d2) {
+  // N . K(x) + trace(grad K(x) B), x = c - q.
+  const V3 x = centre - q;
+  const double inv_d = 1.0 / std::sqrt(d2);
+  const double inv_d3 = inv_d * inv_d * inv_d;
+  return kInv4Pi * inv_d3 * (dipole.dot(x) + trace - 3.0 * x.dot(second * x) / d2);
+}
+
+// L lanes of doubles: each lane's arithmetic is the scalar operation (IEEE, no contraction), so
+// a lane gives the bits the scalar code gives.
+template <int L>
+struct LanesOf;
+template <>
+struct LanesOf<2> {
+  using type = double __attribute__((vector_size(16)));
+};
+template <>
+struct LanesOf<4> {
+  using type = double __attribute__((vector_size(32)));
+};
+template <int L>
+using Lanes = typename LanesOf<L>::type;
+
+// The far-field terms of a node at the queries idx[f, count), L at a time, each lane doing
+// FarTerm's operations in the order of its Eigen expressions (x, then |x|^2 as squaredNorm;
+// checked bit for bit against it in tests/host/winding_test.cc). Returns where it stopped.
+template <int L>
+[[gnu::always_inline]] inline std::size_t FarLanes(const V3& c, const V3& n, double trace, const Eigen::Matrix3d& s,
+                                                   std::span<const V3> queries, const std::uint32_t* idx, std::size_t f,
+                                                   std::size_t count, std::span<double> out) {
+  using V = Lanes<L>;
+  // In locals: the stores to `out` could alias them (both double) and force a reload a group.
+  // A scalar in an expression with lanes stands for itself on every lane.
+  const double c0 = c.x(), c1 = c.y(), c2 = c.z();
+  const double n0 = n.x(), n1 = n.y(), n2 = n.z(), tr = trace;
+  const double s00 = s(0, 0), s01 = s(0, 1), s02 = s(0, 2);
+  const double s10 = s(1, 0), s11 = s(1, 1), s12 = s(1, 2);
+  const double s20 = s(2, 0), s21 = s(2, 1), s22 = s(2, 2);
+  for (; f + L <= count; f += L) {
+    V q0, q1, q2;
+    for (int l = 0; l < L; ++l) {
+      const V3& q = queries[idx[f + static_cast<std::size_t>(l)]];
+      q0[l] = q.x(), q1[l] = q.y(), q2[l] = q.z();
+    }
+    const V x0 = c0 - q0, x1 = c1 - q1, x2 = c2 - q2;
+    const V d2 = (x0 * x0 + x1 * x1) + x2 * x2;
+    V root;
+    for (int l = 0; l < L; ++l) root[l] = std::sqrt(d2[l]);
+    const V inv_d = 1.0 / root;
+    const V inv_d3 = inv_d * inv_d * inv_d;
+    const V dot = (n0 * x0 + n1 * x1) + n2 * x2;
+    const V b0 = (s00 * x0 + s01 * x1) + s02 * x2;
+    const V b1 = (s10 * x0 + s11 * x1) + s12 * x2;
+    const V b2 = s20 * x0 + (s21 * x1 + s22 * x2);
+    const V xbx = (x0 * b0 + x1 * b1) + x2 * b2;
+    const V term = kInv4Pi * inv_d3 * (dot + tr - 3.0 * xbx / d2);
+    for (int l = 0; l < L; ++l) out[idx[f + static_cast<std::size_t>(l)]] += term[l];
+  }
+  return f;
+}
+
+// A leaf's dipoles [begin, end) at the queries idx[f, count), L at a time, each lane as Dipole.
+// Returns where it stopped.
+template <int L>
+[[gnu::always_inline]] inline std::size_t LeafLanes(const V3* points, const V3* weighted_normals, std::uint32_t begin,
+                                                    std::uint32_t end, std::span<const V3> queries,
+                                                    const std::uint32_t* idx, std::size_t f, std::size_t count,
+                                                    std::span<double> out) {
+  using V = Lanes<L>;
+  for (; f + L <= count; f += L) {
+    V q0, q1, q2, w;
+    for (int l = 0; l < L; ++l) {
+      const V3& q = queries[idx[f + static_cast<std::size_t>(l)]];
+      q0[l] = q.x(), q1[l] = q.y(), q2[l] = q.z();
+      w[l] = out[idx[f + static_cast<std::size_t>(l)]];
+    }
+    for (std::uint32_t k = begin; k < end; ++k) {
+      const V3& p = points[k];
+      const V3& a = weighted_normals[k];
+      const V d0 = p.x() - q0, d1 = p.y() - q1, d2 = p.z() - q2;
+      const V r2 = (d0 * d0 + d1 * d1) + d2 * d2;
+      V root;
+      for (int l = 0; l < L; ++l) root[l] = std::sqrt(r2[l]);
+      const V term = (a.x() * d0 + a.y() * d1 + a.z() * d2) * kInv4Pi / (r2 * root);
+      w += r2 > 0.0 ? term : V{};  // 0 at the dipole itself (NaN and infinity dropped)
+    }
+    for (int l = 0; l < L; ++l) out[idx[f + static_cast<std::size_t>(l)]] = w[l];
+  }
+  return f;
+}
 
 }  // namespace
 
@@ -126,16 +216,6 @@ std::int32_t WindingNumber::BuildNode(std::uint32_t begin, std::uint32_t end) {
   return id;
 }
 
-// One node's far-field term at q, d2 = |centre - q|^2 (winding.h).
-inline double FarTerm(const V3& centre, const V3& dipole, double trace, const Eigen::Matrix3d& second, const V3& q,
-                      double d2) {
-  // N . K(x) + trace(grad K(x) B), x = c - q.
-  const V3 x = centre - q;
-  const double inv_d = 1.0 / std::sqrt(d2);
-  const double inv_d3 = inv_d * inv_d * inv_d;
-  return kInv4Pi * inv_d3 * (dipole.dot(x) + trace - 3.0 * x.dot(second * x) / d2);
-}
-
 double WindingNumber::operator()(const V3& q) const {
   if (nodes_.empty()) return 0.0;
   double w = 0.0;
@@ -159,7 +239,8 @@ double WindingNumber::operator()(const V3& q) const {
   return w;
 }
 
-void WindingNumber::operator()(std::span<const V3> queries, std::span<double> out) const {
+template <int kLanes>
+[[gnu::always_inline]] inline void WindingNumber::Batch(std::span<const V3> queries, std::span<double> out) const {
   const std::size_t m = std::min(queries.size(), out.size());
   std::fill(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(m), 0.0);
   if (nodes_.empty() || m == 0) return;
@@ -182,64 +263,21 @@ void WindingNumber::operator()(std::span<const V3> queries, std::span<double> ou
   for (std::size_t i = 1; i < m; ++i) lo = lo.cwiseMin(queries[i]), hi = hi.cwiseMax(queries[i]);
   stack.push_back({lo, hi, 0, 0, static_cast<std::uint32_t>(m)});
 
-  // The far-field terms of `node` at the queries far[0, count), two at a time: each lane does
-  // FarTerm's operations in the order of its Eigen expressions (x, then |x|^2 as squaredNorm;
-  // checked bit for bit against it in tests/host/winding_test.cc).
-  const auto far_terms = [&](const Node& node, const Expansion& e, const std::uint32_t* idx, std::size_t count) {
-    const Eigen::Matrix3d& s = e.second;
-    const V3& c = node.centre;
-    // In locals: the stores to `out` could alias them (both double) and force a reload a pair.
-    const auto both = [](double v) { return V2{v, v}; };
-    const V2 c0 = both(c.x()), c1 = both(c.y()), c2 = both(c.z());
-    const V2 n0 = both(e.dipole.x()), n1 = both(e.dipole.y()), n2 = both(e.dipole.z()), tr = both(e.trace);
-    const V2 s00 = both(s(0, 0)), s01 = both(s(0, 1)), s02 = both(s(0, 2));
-    const V2 s10 = both(s(1, 0)), s11 = both(s(1, 1)), s12 = both(s(1, 2));
-    const V2 s20 = both(s(2, 0)), s21 = both(s(2, 1)), s22 = both(s(2, 2));
-    std::size_t f = 0;
-    for (; f + 1 < count; f += 2) {
-      const V3& qa = queries[idx[f]];
-      const V3& qb = queries[idx[f + 1]];
-      const V2 x0 = c0 - V2{qa.x(), qb.x()};
-      const V2 x1 = c1 - V2{qa.y(), qb.y()};
-      const V2 x2 = c2 - V2{qa.z(), qb.z()};
-      const V2 d2 = (x0 * x0 + x1 * x1) + x2 * x2;
-      const V2 inv_d = 1.0 / V2{std::sqrt(d2[0]), std::sqrt(d2[1])};
-      const V2 inv_d3 = inv_d * inv_d * inv_d;
-      const V2 dot = (n0 * x0 + n1 * x1) + n2 * x2;
-      const V2 b0 = (s00 * x0 + s01 * x1) + s02 * x2;
-      const V2 b1 = (s10 * x0 + s11 * x1) + s12 * x2;
-      const V2 b2 = s20 * x0 + (s21 * x1 + s22 * x2);
-      const V2 xbx = (x0 * b0 + x1 * b1) + x2 * b2;
-      const V2 term = kInv4Pi * inv_d3 * (dot + tr - 3.0 * xbx / d2);
-      out[idx[f]] += term[0];
-      out[idx[f + 1]] += term[1];
-    }
+  const auto far_terms = [&](const Node& node, const Expansion& e, const std::uint32_t* idx, std::size_t count)
+      __attribute__((always_inline)) {
+    std::size_t f = FarLanes<kLanes>(node.centre, e.dipole, e.trace, e.second, queries, idx, 0, count, out);
+    if constexpr (kLanes > 2) f = FarLanes<2>(node.centre, e.dipole, e.trace, e.second, queries, idx, f, count, out);
     if (f < count) {
       const V3& q = queries[idx[f]];
-      out[idx[f]] += FarTerm(c, e.dipole, e.trace, s, q, (c - q).squaredNorm());
+      out[idx[f]] += FarTerm(node.centre, e.dipole, e.trace, e.second, q, (node.centre - q).squaredNorm());
     }
   };
-  // A leaf's dipoles at the queries idx[0, count), two at a time, each lane as Dipole.
-  const auto leaf_terms = [&](const Node& node, const std::uint32_t* idx, std::size_t count) {
-    std::size_t f = 0;
-    for (; f + 1 < count; f += 2) {
-      const V3& qa = queries[idx[f]];
-      const V3& qb = queries[idx[f + 1]];
-      V2 w = {out[idx[f]], out[idx[f + 1]]};
-      for (std::uint32_t k = node.begin; k < node.end; ++k) {
-        const V3& p = points_[k];
-        const V3& a = weighted_normals_[k];
-        const V2 d0 = V2{p.x(), p.x()} - V2{qa.x(), qb.x()};
-        const V2 d1 = V2{p.y(), p.y()} - V2{qa.y(), qb.y()};
-        const V2 d2 = V2{p.z(), p.z()} - V2{qa.z(), qb.z()};
-        const V2 r2 = (d0 * d0 + d1 * d1) + d2 * d2;
-        const V2 term =
-            (a.x() * d0 + a.y() * d1 + a.z() * d2) * kInv4Pi / (r2 * V2{std::sqrt(r2[0]), std::sqrt(r2[1])});
-        w += r2 > 0.0 ? term : V2{0.0, 0.0};  // 0 at the dipole itself (NaN and infinity dropped)
-      }
-      out[idx[f]] = w[0];
-      out[idx[f + 1]] = w[1];
-    }
+  const auto leaf_terms = [&](const Node& node, const std::uint32_t* idx, std::size_t count)
+      __attribute__((always_inline)) {
+    const V3* p = points_.data();
+    const V3* a = weighted_normals_.data();
+    std::size_t f = LeafLanes<kLanes>(p, a, node.begin, node.end, queries, idx, 0, count, out);
+    if constexpr (kLanes > 2) f = LeafLanes<2>(p, a, node.begin, node.end, queries, idx, f, count, out);
     if (f < count) {
       const V3& q = queries[idx[f]];
       double w = out[idx[f]];
@@ -302,5 +340,28 @@ void WindingNumber::operator()(std::span<const V3> queries, std::span<double> ou
     stack.push_back(near);
   }
 }
+
+void WindingNumber::operator()(std::span<const V3> queries, std::span<double> out) const {
+#if defined(__x86_64__)
+  // Four lanes where the CPU has AVX2 (the same operations on each lane: the same bits).
+  static const bool avx2 = __builtin_cpu_supports("avx2") != 0;
+  if (avx2) {
+    BatchAvx2(queries, out);
+    return;
+  }
+#endif
+  Batch<2>(queries, out);
+}
+
+void WindingNumber::BatchTwoLanes(std::span<const V3> queries, std::span<double> out) const { Batch<2>(queries, out); }
+
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void WindingNumber::BatchAvx2(std::span<const V3> queries,
+                                                              std::span<double> out) const {
+  Batch<4>(queries, out);
+}
+#else
+void WindingNumber::BatchAvx2(std::span<const V3> queries, std::span<double> out) const { Batch<2>(queries, out); }
+#endif
 
 }  // namespace palpa::field

@@ -47,8 +47,11 @@ class WindingNumber {
   double operator()(const Eigen::Vector3d& q) const;
   /// w at each of `queries` into `out` (same size), bit for bit what operator() gives each: one
   /// walk of the tree for the whole set (a node is read once for every query that reaches it) and
-  /// two queries at a time through the far-field terms. For queries near one another (a brick).
+  /// two queries at a time (four on x86-64 with AVX2) through the far-field and leaf terms. For
+  /// queries near one another (a brick).
   void operator()(std::span<const Eigen::Vector3d> queries, std::span<double> out) const;
+  /// The batch with two lanes whatever the CPU (what operator() runs without AVX2), for the tests.
+  void BatchTwoLanes(std::span<const Eigen::Vector3d> queries, std::span<double> out) const;
 
  private:
   // Tree build state of a node.
@@ -72,6 +75,10 @@ class WindingNumber {
     Eigen::Matrix3d second;  // sum a_i n_i (P_i - centre)^T
   };
   std::int32_t BuildNode(std::uint32_t begin, std::uint32_t end);
+  // The batch evaluation, kLanes (2 or 4) queries at a time through the far-field and leaf terms.
+  template <int kLanes>
+  void Batch(std::span<const Eigen::Vector3d> queries, std::span<double> out) const;
+  void BatchAvx2(std::span<const Eigen::Vector3d> queries, std::span<double> out) const;  // 4 lanes (x86-64 AVX2)
 
   std::vector<Eigen::Vector3d> points_;            // in tree order
   std::vector<Eigen::Vector3d> weighted_normals_;  // a_i n_i, in tree order
