@@ -935,17 +935,26 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       float* values = field.BrickValues(b);
       node.clear();
       at.clear();
+      // Every node's trilinear w is a convex combination of the corners' (weights k/8 products,
+      // exact), computed with 11 roundings of at most 2^-24 each: with all corners in (0.5001, 2)
+      // it is >= 1/2 at every node, with all in (-1, 0.4999) below 1/2; the filter then needs no sum.
+      const bool all_in = std::all_of(cw.begin(), cw.end(), [](float x) { return x > 0.5001f && x < 2.0f; });
+      const bool all_out = std::all_of(cw.begin(), cw.end(), [](float x) { return x < 0.4999f && x > -1.0f; });
       for (int a = 0; a < kB; ++a)
         for (int c = 0; c < kB; ++c) {
           // Trilinear w from the brick corners: a cheap first filter (exact w below). The sum over
           // the corners q in order of ((w_q u_q) v_q) t_q, its first two factors once a row.
-          const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB;
-          std::array<float, 8> row{};
-          for (std::size_t q = 0; q < 8; ++q)
-            row[q] = cw[q] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
           std::array<float, kB> wi{};
-          for (std::size_t q = 0; q < 8; ++q)
-            for (std::size_t e = 0; e < kB; ++e) wi[e] += row[q] * t_weight[q & 1][e];
+          if (all_in || all_out) {
+            wi.fill(all_in ? 1.0f : 0.0f);
+          } else {
+            const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB;
+            std::array<float, 8> row{};
+            for (std::size_t q = 0; q < 8; ++q)
+              row[q] = cw[q] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
+            for (std::size_t q = 0; q < 8; ++q)
+              for (std::size_t e = 0; e < kB; ++e) wi[e] += row[q] * t_weight[q & 1][e];
+          }
           for (int e = 0; e < kB; ++e) {
             const float x = values[(a * kB + c) * kB + e];
             if ((wi[static_cast<std::size_t>(e)] >= 0.5f) == (x <= 0.0f)) continue;
