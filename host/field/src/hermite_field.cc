@@ -1052,13 +1052,20 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
   tbb::enumerable_thread_specific<Eigen::AlignedBox3d> boxes;
   tbb::parallel_for(tbb::blocked_range<int>(0, count[0]), [&](const auto& r) {
     Eigen::AlignedBox3d& box = boxes.local();
-    for (int i = r.begin(); i != r.end(); ++i)
+    std::vector<V3> p;  // a plane's lattice points outside the grid, w for them in one batch
+    std::vector<double> w;
+    for (int i = r.begin(); i != r.end(); ++i) {
+      p.clear();
       for (int j = 0; j < count[1]; ++j)
         for (int k = 0; k < count[2]; ++k) {
-          const V3 p = lo + step * V3(i, j, k);
-          if (grid_box.contains(p)) continue;
-          if (rule.Inside(winding(p), p)) box.extend(p);
+          const V3 q = lo + step * V3(i, j, k);
+          if (!grid_box.contains(q)) p.push_back(q);
         }
+      w.resize(p.size());
+      winding(p, w);
+      for (std::size_t m = 0; m < p.size(); ++m)
+        if (rule.Inside(w[m], p[m])) box.extend(p[m]);
+    }
   });
   Eigen::AlignedBox3d box;
   for (const Eigen::AlignedBox3d& b : boxes)
