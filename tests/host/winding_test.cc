@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -106,6 +107,44 @@ TEST(WindingNumber, KittenTreeMatchesBruteForce) {
   EXPECT_GT(checked, 300);
   EXPECT_LT(worst, 0.05);
   EXPECT_NEAR(w(lo - (hi - lo)), 0.0, 0.01);
+}
+
+// The batch evaluation (one walk of the tree for a set of queries, two or four far-field terms at
+// a time) gives each query the single evaluation's value to the bit: the build's labels depend on it.
+// Queries in clusters (a brick's nodes, as the build asks), on the samples themselves (the
+// dipole's 0) and scattered over and beyond the bounding box; odd and even set sizes.
+TEST(WindingNumber, BatchIsTheSingleEvaluationBitForBit) {
+  const auto pts = ReadPoints(testing::DataFile("kitten.xyz"));
+  ASSERT_TRUE(pts) << pts.error().message;
+  const WindingNumber w(pts->positions, pts->normals, SampleAreas(pts->positions, 16));
+  V3 lo = pts->positions[0], hi = lo;
+  for (const V3& x : pts->positions) lo = lo.cwiseMin(x), hi = hi.cwiseMax(x);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit(-0.2, 1.2);
+  std::size_t compared = 0;
+  for (int set = 0; set < 60; ++set) {
+    std::vector<V3> q;
+    const V3 centre = lo + (hi - lo).cwiseProduct(V3(unit(rng), unit(rng), unit(rng)));
+    const double reach = (hi - lo).norm() * (set % 3 == 0 ? 0.5 : 0.02);
+    const std::size_t count = 1 + static_cast<std::size_t>(set) * 17 % 301;
+    for (std::size_t i = 0; i < count; ++i)
+      q.push_back(centre + reach * V3(unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5));
+    if (set % 4 == 1) q.push_back(pts->positions[static_cast<std::size_t>(set) * 83 % pts->positions.size()]);
+    std::vector<double> batch(q.size()), two(q.size());
+    w(q, batch);              // four lanes where the CPU has AVX2
+    w.BatchTwoLanes(q, two);  // the portable path
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      const double single = w(q[i]);
+      ASSERT_EQ(std::memcmp(&single, &batch[i], sizeof(double)), 0)
+          << "set " << set << " query " << i << ": " << single << " vs " << batch[i];
+      ASSERT_EQ(std::memcmp(&single, &two[i], sizeof(double)), 0)
+          << "set " << set << " query " << i << ": " << single << " vs " << two[i] << " (two lanes)";
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 8000U);
+  std::vector<double> none;
+  w(std::span<const V3>(), none);
 }
 
 }  // namespace

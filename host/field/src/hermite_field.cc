@@ -117,6 +117,28 @@ class CrossingResult {
   std::vector<std::size_t>& out_;
 };
 
+// nanoflann result set: is any sample within `radius` of the query (sqrt(d^2) <= radius, the test
+// the nearest sample's distance would take)? The search stops at the first; the bound the tree
+// prunes with is a little wider than radius^2, so that none is missed by rounding.
+class AnyWithin {
+ public:
+  explicit AnyWithin(double radius) : radius_(radius), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+  void init() {}
+  void clear() {}
+  std::size_t size() const { return found_ ? 1 : 0; }
+  bool full() const { return true; }
+  double worstDist() const { return bound_sq_; }
+  bool addPoint(double dist_sq, std::size_t /*j*/) {
+    found_ = std::sqrt(dist_sq) <= radius_;
+    return !found_;
+  }
+  bool found() const { return found_; }
+
+ private:
+  double radius_, bound_sq_;
+  bool found_ = false;
+};
+
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -749,15 +771,21 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
   std::vector<std::uint8_t> corner_in(corner_w.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i)
+    // One batch per plane of corners (WindingNumber's batch: one walk of the tree).
+    std::vector<V3> p(cd[1] * cd[2]);
+    std::vector<double> w(p.size());
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
       for (std::size_t j = 0; j < cd[1]; ++j)
-        for (std::size_t k = 0; k < cd[2]; ++k) {
-          const std::size_t c = (i * cd[1] + j) * cd[2] + k;
-          const V3 p = node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB));
-          const double w = winding(p);
-          corner_w[c] = static_cast<float>(w);
-          corner_in[c] = rule.Inside(w, p) ? 1 : 0;
-        }
+        for (std::size_t k = 0; k < cd[2]; ++k)
+          p[j * cd[2] + k] =
+              node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB));
+      winding(p, w);
+      for (std::size_t jk = 0; jk < p.size(); ++jk) {
+        const std::size_t c = i * cd[1] * cd[2] + jk;
+        corner_w[c] = static_cast<float>(w[jk]);
+        corner_in[c] = rule.Inside(w[jk], p[jk]) ? 1 : 0;
+      }
+    }
   });
   const auto plane_bricks = static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
   // Corner c (bit 2: +x, bit 1: +y, bit 0: +z) of brick b in the corner lattice.
@@ -796,19 +824,21 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // Signed distance to the inner balls (voxels) where w is unclear; +infinity elsewhere.
     std::vector<double> balls(w.size());
     std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
+    std::vector<V3> q(w.size());
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
       const auto [bi, bj, bk] = field.BrickCoords(b);
       for (int a = 0; a < kH; ++a)
         for (int c = 0; c < kH; ++c)
-          for (int e = 0; e < kH; ++e) {
-            const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
-            const V3 q = node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
-            w[x] = winding(q);
-            const ClosingRule::Balls ball = rule.BallPhi(w[x], q);
-            balls[x] = ball.phi / h;
-            threshold[x] = ball.threshold;
-          }
+          for (int e = 0; e < kH; ++e)
+            q[static_cast<std::size_t>((a * kH + c) * kH + e)] =
+                node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
+      winding(q, w);
+      for (std::size_t x = 0; x < w.size(); ++x) {
+        const ClosingRule::Balls ball = rule.BallPhi(w[x], q[x]);
+        balls[x] = ball.phi / h;
+        threshold[x] = ball.threshold;
+      }
       float* values = field.BrickValues(b);
       const auto at = [&](int a, int c, int e) { return w[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
       const auto ball_at = [&](int a, int c, int e) { return balls[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
@@ -887,40 +917,77 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
+    // The trilinear filter's weight along the last axis: 1 - t at corners q with bit 0 clear.
+    std::array<std::array<float, kB>, 2> t_weight{};
+    for (std::size_t e = 0; e < kB; ++e) {
+      const float t = static_cast<float>(e) / kB;
+      t_weight[0][e] = 1.0f - t;
+      t_weight[1][e] = t;
+    }
+    // A brick's nodes that need w (the filters below), then w for all of them in one batch.
+    std::vector<int> node;
+    std::vector<V3> at;
+    std::vector<double> wn;
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = evaluated[m];
       const std::array<float, 8> cw = corners(b);
       const auto [bi, bj, bk] = field.BrickCoords(b);
       float* values = field.BrickValues(b);
+      node.clear();
+      at.clear();
+      // Every node's trilinear w is a convex combination of the corners' (weights k/8 products,
+      // exact), computed with 11 roundings of at most 2^-24 each: with all corners in (0.5001, 2)
+      // it is >= 1/2 at every node, with all in (-1, 0.4999) below 1/2; the filter then needs no sum.
+      const bool all_in = std::all_of(cw.begin(), cw.end(), [](float x) { return x > 0.5001f && x < 2.0f; });
+      const bool all_out = std::all_of(cw.begin(), cw.end(), [](float x) { return x < 0.4999f && x > -1.0f; });
       for (int a = 0; a < kB; ++a)
-        for (int c = 0; c < kB; ++c)
-          for (int e = 0; e < kB; ++e) {
-            float& x = values[(a * kB + c) * kB + e];
-            // Trilinear w from the brick corners: a cheap first filter (exact w below).
-            const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB, t = static_cast<float>(e) / kB;
-            float wi = 0.0f;
-            for (int q = 0; q < 8; ++q)
-              wi += cw[static_cast<std::size_t>(q)] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v) *
-                    ((q & 1) != 0 ? t : 1.0f - t);
-            if ((wi >= 0.5f) == (x <= 0.0f)) continue;
-            const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
-            std::size_t idx = 0;
-            double d2 = 0.0;
-            tree.knnSearch(p.data(), 1, &idx, &d2);
-            const double ds = std::sqrt(d2);
-            if (ds <= trust) continue;
-            const double w = winding(p);
-            if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
-            if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
-            const float mag = std::min(band, static_cast<float>(ds / h));
-            x = w >= 0.5 ? -mag : mag;
-            ++local;
-            // The local estimate reached a grid face where w says outside. Near an open side's
-            // closing surface w is still a tenth or more there (a thin open plate cut by its grid:
-            // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
-            // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
-            if (w >= kOpenFaceWinding && on_grid_face(bi * kB + a, bj * kB + c, bk * kB + e)) ++face_local;
+        for (int c = 0; c < kB; ++c) {
+          // Trilinear w from the brick corners: a cheap first filter (exact w below). The sum over
+          // the corners q in order of ((w_q u_q) v_q) t_q, its first two factors once a row.
+          std::array<float, kB> wi{};
+          if (all_in || all_out) {
+            wi.fill(all_in ? 1.0f : 0.0f);
+          } else {
+            const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB;
+            std::array<float, 8> row{};
+            for (std::size_t q = 0; q < 8; ++q)
+              row[q] = cw[q] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
+            for (std::size_t q = 0; q < 8; ++q)
+              for (std::size_t e = 0; e < kB; ++e) wi[e] += row[q] * t_weight[q & 1][e];
           }
+          for (int e = 0; e < kB; ++e) {
+            const float x = values[(a * kB + c) * kB + e];
+            if ((wi[static_cast<std::size_t>(e)] >= 0.5f) == (x <= 0.0f)) continue;
+            const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
+            AnyWithin near(trust);  // the nearest sample within trust?
+            tree.findNeighbors(near, p.data(), nanoflann::SearchParams());
+            if (near.found()) continue;
+            node.push_back((a * kB + c) * kB + e);
+            at.push_back(p);
+          }
+        }
+      wn.resize(at.size());
+      winding(at, wn);
+      for (std::size_t f = 0; f < node.size(); ++f) {
+        const int a = node[f] / (kB * kB), c = node[f] / kB % kB, e = node[f] % kB;
+        float& x = values[node[f]];
+        const V3& p = at[f];
+        const double w = wn[f];
+        if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
+        if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
+        std::size_t idx = 0;
+        double d2 = 0.0;
+        tree.knnSearch(p.data(), 1, &idx, &d2);
+        const double ds = std::sqrt(d2);
+        const float mag = std::min(band, static_cast<float>(ds / h));
+        x = w >= 0.5 ? -mag : mag;
+        ++local;
+        // The local estimate reached a grid face where w says outside. Near an open side's
+        // closing surface w is still a tenth or more there (a thin open plate cut by its grid:
+        // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
+        // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
+        if (w >= kOpenFaceWinding && on_grid_face(bi * kB + a, bj * kB + c, bk * kB + e)) ++face_local;
+      }
     }
     far_flipped += local;
     far_faces += face_local;
@@ -985,13 +1052,20 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
   tbb::enumerable_thread_specific<Eigen::AlignedBox3d> boxes;
   tbb::parallel_for(tbb::blocked_range<int>(0, count[0]), [&](const auto& r) {
     Eigen::AlignedBox3d& box = boxes.local();
-    for (int i = r.begin(); i != r.end(); ++i)
+    std::vector<V3> p;  // a plane's lattice points outside the grid, w for them in one batch
+    std::vector<double> w;
+    for (int i = r.begin(); i != r.end(); ++i) {
+      p.clear();
       for (int j = 0; j < count[1]; ++j)
         for (int k = 0; k < count[2]; ++k) {
-          const V3 p = lo + step * V3(i, j, k);
-          if (grid_box.contains(p)) continue;
-          if (rule.Inside(winding(p), p)) box.extend(p);
+          const V3 q = lo + step * V3(i, j, k);
+          if (!grid_box.contains(q)) p.push_back(q);
         }
+      w.resize(p.size());
+      winding(p, w);
+      for (std::size_t m = 0; m < p.size(); ++m)
+        if (rule.Inside(w[m], p[m])) box.extend(p[m]);
+    }
   });
   Eigen::AlignedBox3d box;
   for (const Eigen::AlignedBox3d& b : boxes)
