@@ -62,7 +62,7 @@ bool Prepare(const std::string& path) {
   if (path.empty()) {
     bytes = SphereBlob();
   } else {
-    auto b = palpa::blob::ReadFile(path.c_str(), palpa::blob::Load::kAsStored);
+    auto b = palpa::blob::ReadFile(path.c_str());
     if (!b) {
       std::fprintf(stderr, "%s: %s\n", path.c_str(), b.error().what());
       return false;

@@ -79,9 +79,9 @@ bool Project(const Float64Field& f, Vec3d& x, Vec3d& normal) {
 }  // namespace
 
 std::unique_ptr<Field> LoadField(const std::string& path) {
-  auto stored = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
-  if (!stored) Die(path + ": " + stored.error().what());
-  blob::VerifiedField field = Verified(std::move(*stored), path);
+  auto loaded = blob::LoadFile(path.c_str());
+  if (!loaded) Die(path + ": " + loaded.error().what());
+  blob::VerifiedField field = std::move(*loaded);
   if (field.view().version != blob::kVersion2) return std::make_unique<Field>(std::move(field), std::nullopt);
   // v2: the fixed-point tick samples the bricks in place, as palpad; `view` is the dense form.
   blob::VerifiedField dense = Verified(blob::DenseV1(field.view()), path);

@@ -189,10 +189,11 @@ TEST_F(Sphere926Mesh, EveryVertexWithinATenthOfAVoxelOfRadiusTenAndClosed) {
   const std::string field = Path("s926.palpa");
   const Outcome b = Palpa("build " + DataFile("sphere926.pwn").string() + " -o " + field + " --cells 150 -q");
   ASSERT_EQ(b.code, 0) << b.out;
-  auto bytes = blob::ReadFile(field.c_str());
-  ASSERT_TRUE(bytes.has_value());
-  const auto view = blob::Verify(*bytes);
-  ASSERT_TRUE(view.has_value()) << view.error().what();
+  auto stored = blob::LoadFile(field.c_str());
+  ASSERT_TRUE(stored.has_value()) << stored.error().what();
+  const auto dense = blob::VerifyOwned(blob::DenseV1(stored->view()));  // the dense equivalent
+  ASSERT_TRUE(dense.has_value()) << dense.error().what();
+  const blob::FieldView* view = &dense->view();
   auto m = mesh::ExtractZeroSurface(*view);
   ASSERT_TRUE(m) << m.error().message;
   ASSERT_GT(m->vertices.size(), 1000u);
@@ -214,7 +215,7 @@ TEST_F(Sphere926Mesh, InPlaceV2MeshIsTheDenseGridsMeshBitForBit) {
   const std::string field = Path("s926v2.palpa");
   const Outcome b = Palpa("build " + DataFile("sphere926.pwn").string() + " -o " + field + " --cells 150 -q");
   ASSERT_EQ(b.code, 0) << b.out;
-  auto stored = blob::ReadFile(field.c_str(), blob::Load::kAsStored);
+  auto stored = blob::ReadFile(field.c_str());
   ASSERT_TRUE(stored.has_value());
   const auto v2 = blob::Verify(*stored);
   ASSERT_TRUE(v2.has_value()) << v2.error().what();

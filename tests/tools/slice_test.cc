@@ -119,7 +119,7 @@ TEST_F(InPlaceSlice, V2SliceIsTheDenseGridsSlicePixelForPixel) {
   const Outcome b =
       Palpa("build " + DataFile("kitten.xyz").string() + " -o " + field + " --cells 90 --band 2 --band-outside 5 -q");
   ASSERT_EQ(b.code, 0) << b.out;
-  auto stored = blob::ReadFile(field.c_str(), blob::Load::kAsStored);
+  auto stored = blob::ReadFile(field.c_str());
   ASSERT_TRUE(stored.has_value());
   const auto v2 = blob::Verify(*stored);
   ASSERT_TRUE(v2.has_value()) << v2.error().what();

@@ -89,7 +89,7 @@ std::expected<std::unique_ptr<UploadListener>, std::string> UploadListener::Crea
 }
 
 std::expected<blob::FieldView, std::string> UploadListener::LoadInitial(const std::string& path) {
-  auto file = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // used in place
+  auto file = blob::ReadFile(path.c_str());  // used in place
   if (!file) return std::unexpected(path + ": " + file.error().what());
   if (file->size() > config_.max_blob)
     return std::unexpected(path + ": the field is " + std::to_string(file->size()) + " bytes, more than --max-blob " +

@@ -146,9 +146,7 @@ int Run(const palpa::palpad::Options& o) {
   } else {
     // Field: read as stored (a v2 blob is sampled in place), then verify every byte before
     // anything uses it. `owned` outlives the loop.
-    auto file = palpa::blob::ReadFile(o.field_path.c_str(), palpa::blob::Load::kAsStored);
-    if (!file) return Fail(kExitBadInput, o.field_path + ": " + file.error().what());
-    auto field = palpa::blob::VerifyOwned(std::move(*file));
+    auto field = palpa::blob::LoadFile(o.field_path.c_str());
     if (!field) return Fail(kExitBadInput, o.field_path + ": " + field.error().what());
     owned.emplace(std::move(*field));
     field_view.emplace(owned->view());
@@ -168,9 +166,7 @@ int Run(const palpa::palpad::Options& o) {
   std::optional<palpa::blob::VerifiedField> swap_blob;
   std::optional<palpa::servo::ServoField> swap_field;
   if (!o.swap_at_field.empty()) {
-    auto file = palpa::blob::ReadFile(o.swap_at_field.c_str(), palpa::blob::Load::kAsStored);
-    if (!file) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + file.error().what());
-    auto verified = palpa::blob::VerifyOwned(std::move(*file));
+    auto verified = palpa::blob::LoadFile(o.swap_at_field.c_str());
     if (!verified) return Fail(kExitBadInput, "--swap-at " + o.swap_at_field + ": " + verified.error().what());
     swap_blob.emplace(std::move(*verified));
     const palpa::blob::FieldView& view = swap_blob->view();

@@ -17,16 +17,11 @@ namespace {
 
 using blob::MethodName;
 
-// Reads and verifies; prints the refusal naming the file, field and byte.
+// mesh::LoadField; prints the refusal naming the file, field and byte.
 std::optional<blob::VerifiedField> Load(const std::string& path, const char* cmd) {
-  auto bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);  // v2 as stored: its own figures
-  if (!bytes) {
-    fmt::print(stderr, "palpa {}: {}\n", cmd, bytes.error().what());
-    return std::nullopt;
-  }
-  auto field = blob::VerifyOwned(std::move(*bytes));
+  auto field = mesh::LoadField(path);  // v2 as stored: its own figures
   if (!field) {
-    fmt::print(stderr, "palpa {}: {}: {}\n", cmd, path, field.error().what());
+    fmt::print(stderr, "palpa {}: {}\n", cmd, field.error().message);
     return std::nullopt;
   }
   return std::move(*field);

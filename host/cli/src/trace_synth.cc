@@ -29,6 +29,7 @@
 #include "commands.h"
 #include "palpa/blob/blob.h"
 #include "palpa/io/atomic_file.h"
+#include "palpa/mesh/field_file.h"
 #include "palpa/mesh/field_sampler.h"
 #include "palpa/trace/trace.h"
 
@@ -570,17 +571,12 @@ class Synth {
 
 int RunTraceSynth(const TraceSynthArgs& a) {
   if (const int refused = CheckOutput("trace synth", a.output, {a.field}); refused != kExitOk) return refused;
-  auto bytes = blob::ReadFile(a.field.c_str(), blob::Load::kAsStored);  // v2 sampled in place
-  if (!bytes) {
-    fmt::print(stderr, "palpa trace synth: {}\n", bytes.error().what());
+  const auto loaded = mesh::LoadField(a.field);  // v2 sampled in place
+  if (!loaded) {
+    fmt::print(stderr, "palpa trace synth: {}\n", loaded.error().message);
     return kExitBadInput;
   }
-  auto view = blob::Verify(*bytes);
-  if (!view) {
-    fmt::print(stderr, "palpa trace synth: {}: {}\n", a.field, view.error().what());
-    return kExitBadInput;
-  }
-  const mesh::FieldSampler field(*view);
+  const mesh::FieldSampler field(loaded->view());
   Synth synth(a, field);
   std::string note;
   if (auto e = synth.Run(note)) {

@@ -20,7 +20,7 @@ int RunUpload(const UploadArgs& a) {
     return kExitBadInput;
   }
   // Verify first: a blob the controller would refuse never leaves this machine.
-  auto blob = blob::ReadFile(a.field.c_str(), blob::Load::kAsStored);
+  auto blob = blob::ReadFile(a.field.c_str());
   if (!blob) {
     fmt::print(stderr, "palpa upload: {}: {}\n", a.field, blob.error().what());
     return kExitBadInput;

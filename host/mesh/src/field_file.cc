@@ -5,7 +5,7 @@
 namespace palpa::mesh {
 
 std::expected<blob::VerifiedField, Error> LoadField(const std::string& path) {
-  auto bytes = blob::ReadFile(path.c_str(), blob::Load::kAsStored);
+  auto bytes = blob::ReadFile(path.c_str());
   if (!bytes) return std::unexpected(Error{bytes.error().what()});
   auto field = blob::VerifyOwned(std::move(*bytes));
   if (!field) return std::unexpected(Error{path + ": " + field.error().what()});

@@ -206,21 +206,15 @@ using BrickSource = std::function<std::optional<std::int32_t>(std::array<std::ui
 /// band ±max(band_inside, band_outside) (v1's rule), and the same metadata. Non-RT.
 [[nodiscard]] std::vector<std::byte> DenseV1(const FieldView& v2);
 
-/// How ReadFile hands a v2 blob back.
-enum class Load {
-  kAsStored,  ///< the file's bytes (palpad, palpa info: the blob is used in place)
-  kDense,     ///< a v2 blob is verified, then re-encoded by DenseV1 for the host tools that index φ
-};
-
 /// The largest blob file ReadFile reads: 4 GiB (1 GiB where size_t has 32 bits), above the
 /// largest field palpa builds (a dense 1000³ v1 blob is 3.7 GiB).
 inline constexpr std::uint64_t kMaxFileBytes =
     sizeof(std::size_t) >= 8 ? std::uint64_t{4} << 30 : std::uint64_t{1} << 30;
 
 /// Reads a whole file into a buffer suitable for Verify (non-RT). Only a regular file of at most
-/// kMaxFileBytes is read (io::ReadBounded: a FIFO or device is refused at once). Errors name the
-/// file; with Load::kDense also the v2 blob's field and byte.
-[[nodiscard]] std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path, Load load = Load::kDense);
+/// kMaxFileBytes is read (io::ReadBounded: a FIFO or device is refused at once), as stored: every
+/// reader uses a v2 blob in place. Errors name the file.
+[[nodiscard]] std::expected<std::vector<std::byte>, BlobError> ReadFile(const char* path);
 
 /// ReadFile as stored, then VerifyOwned: the verified blob file, read once and used in place (no
 /// dense copy of a v2 blob). Errors as ReadFile's and Verify's (the caller names the file in the
