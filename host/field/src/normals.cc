@@ -7,6 +7,8 @@
 #include <vector>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/QR>
 
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
@@ -23,6 +25,36 @@ using V3 = Eigen::Vector3d;
 constexpr std::size_t kRefineNeighbours = 16;
 constexpr double kRefineWidth =
     0.1;  // x the distance to the 16th neighbour (tried 0.1-0.5 on fandisk, knot, sphere, a cube)
+// The candidate planes are told apart by a narrower support: x kRefineWidth, and at least twice the
+// samples' own noise (tried 0.05-1 on fandisk; 1 was the support above: a plane cutting
+// diagonally through an edge gathered as many neighbours within w as either face).
+constexpr double kSelectWidth = 0.1;
+constexpr double kSelectNoise = 2.0;
+// Triples of P_i and two of its kTripleNeighbours nearest: a face met by only a thin row of
+// samples near P_i still has a non-collinear pair among them (9 -> 13: fandisk 0.52 -> 0.49 %).
+constexpr std::size_t kTripleNeighbours = 12;
+
+// RMS offset of P_i's k nearest from the quadric height function fitted to them over the tangent
+// plane of `normal` (least squares, 6 coefficients): the samples' noise where the surface is
+// smooth, free of its curvature, which a plane's offsets count as noise.
+double QuadricResidual(const std::vector<V3>& positions, std::size_t i, const V3& normal,
+                       const std::vector<std::size_t>& idx, std::size_t got, double scale) {
+  if (got < 8) return 0;
+  const V3 u = normal.unitOrthogonal();
+  const V3 v = normal.cross(u);
+  Eigen::MatrixXd a(static_cast<Eigen::Index>(got), 6);
+  Eigen::VectorXd h(static_cast<Eigen::Index>(got));
+  for (std::size_t m = 0; m < got; ++m) {
+    const V3 d = (positions[idx[m]] - positions[i]) / scale;  // unit scale: a well-conditioned fit
+    const double x = d.dot(u);
+    const double y = d.dot(v);
+    const auto row = static_cast<Eigen::Index>(m);
+    a.row(row) << 1, x, y, x * x, x * y, y * y;
+    h[row] = d.dot(normal);
+  }
+  const Eigen::VectorXd c = a.colPivHouseholderQr().solve(h);
+  return scale * std::sqrt((a * c - h).squaredNorm() / static_cast<double>(got - 6));
+}
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -59,8 +91,10 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
   // The noise, one figure for the whole set (a scanner's noise is much the same everywhere): the
   // median over the samples of the median offset of their neighbours from their smooth plane,
   // / 0.674 (the median of |N(0, sigma)|). Per sample, the offsets next to an edge would count
-  // the other face as noise.
+  // the other face as noise. It counts curvature too (the knot's whole set keeps its jet normals);
+  // `fit_noise`, the median RMS residual of quadric fits, does not, and sets the selection width.
   std::vector<double> offset(n);
+  std::vector<double> quadric(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::vector<std::size_t> idx(k + 1);
     std::vector<double> d2(k + 1), residual(k + 1);
@@ -70,11 +104,15 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       std::nth_element(residual.begin(), residual.begin() + static_cast<std::ptrdiff_t>(got / 2),
                        residual.begin() + static_cast<std::ptrdiff_t>(got));
       offset[i] = residual[got / 2];
+      quadric[i] = QuadricResidual(positions, i, start[i], idx, got, std::sqrt(d2[got - 1]));
     }
   });
   std::nth_element(offset.begin(), offset.begin() + static_cast<std::ptrdiff_t>(n / 2), offset.end());
   const double sigma = offset[n / 2] / 0.674;
   offset = {};
+  std::nth_element(quadric.begin(), quadric.begin() + static_cast<std::ptrdiff_t>(n / 2), quadric.end());
+  const double fit_noise = quadric[n / 2];
+  quadric = {};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::vector<std::size_t> idx(k + 1);
     std::vector<double> d2(k + 1), weight(k + 1);
@@ -89,22 +127,27 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
         return std::exp(-t * t);
       };
       // The plane through P_i that most neighbours lie on, among their smooth normals and the
-      // planes through P_i and two of its 8 nearest: near an edge a face's own plane, where the
+      // planes through P_i and two of its 12 nearest: near an edge a face's own plane, where the
       // smooth fit blends both faces (a first-row sample has no neighbour whose smooth normal is
-      // its face's, hence the triples; near-collinear ones are skipped).
+      // its face's, hence the triples; near-collinear ones are skipped). Counted within the
+      // narrow width: a plane through the edge's diagonal passes within w of both faces' rows.
+      const double select = std::max(kSelectWidth * width, kSelectNoise * fit_noise);
       V3 normal = start[i];
       double best = -1;
       const auto consider = [&](V3 candidate) {
         if (candidate.dot(start[i]) < 0) candidate = -candidate;
         double score = 0;
-        for (std::size_t m = 0; m < got; ++m) score += support(candidate, m);
+        for (std::size_t m = 0; m < got; ++m) {
+          const double t = candidate.dot(positions[idx[m]] - positions[i]) / select;
+          score += std::exp(-t * t);
+        }
         if (score > best) {  // ties: the first candidate
           best = score;
           normal = candidate;
         }
       };
       for (std::size_t c = 0; c < got; ++c) consider(start[idx[c]]);
-      const std::size_t near = std::min<std::size_t>(got, 9);
+      const std::size_t near = std::min<std::size_t>(got, kTripleNeighbours + 1);
       for (std::size_t a = 1; a < near; ++a) {
         for (std::size_t b = a + 1; b < near; ++b) {
           const V3 u = positions[idx[a]] - positions[i];
