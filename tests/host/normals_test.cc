@@ -490,6 +490,44 @@ TEST(SmoothNoisyPositions, LeavesCleanSamplesAlone) {
   EXPECT_EQ(sphere.positions, before);
 }
 
+// Sparse clean samples of a detailed surface (a thin torus, ~6 samples round its tube) leave a
+// large quadric residual, but one that grows with the fit's neighbourhood: shape, not noise. The
+// same torus with noise of that size, densely sampled, is measured and averaged.
+TEST(SmoothNoisyPositions, TellsASparseDetailedSurfaceFromNoise) {
+  const auto torus = [](std::size_t n, std::uint64_t seed) {
+    constexpr double kRing = 1.0, kTube = 0.25;
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    Oriented out;
+    while (out.positions.size() < n) {
+      const double u = 2 * std::numbers::pi * unit(rng), v = 2 * std::numbers::pi * unit(rng);
+      if (unit(rng) * (kRing + kTube) > kRing + kTube * std::cos(v)) continue;  // area-uniform
+      const V3 normal(std::cos(v) * std::cos(u), std::cos(v) * std::sin(u), std::sin(v));
+      out.positions.push_back(V3(kRing * std::cos(u), kRing * std::sin(u), 0) + kTube * normal);
+      out.normals.push_back(normal);
+    }
+    return out;
+  };
+  Oriented sparse = torus(400, 8);  // spacing ~0.16 against the tube's radius 0.25; residual 0.0015, noise 0
+  const std::vector<V3> before = sparse.positions;
+  const NoiseSmoothing clean = SmoothNoisyPositions(sparse.positions, sparse.normals, 48, 1e-3);
+  const double threshold = 0.5 * clean.residual;  // the 16-sample residual alone would move them
+  sparse.positions = before;
+  const NoiseSmoothing kept = SmoothNoisyPositions(sparse.positions, sparse.normals, 48, threshold);
+  EXPECT_GT(kept.residual, threshold);
+  EXPECT_LT(kept.noise, 0.5 * threshold) << kept.residual;
+  EXPECT_FALSE(kept.Applied());
+  EXPECT_EQ(sparse.positions, before);
+
+  Oriented noisy = torus(20000, 9);
+  std::mt19937_64 rng(10);
+  std::normal_distribution<double> gauss(0.0, threshold);
+  for (V3& p : noisy.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  const NoiseSmoothing smoothed = SmoothNoisyPositions(noisy.positions, noisy.normals, 48, 0.5 * threshold);
+  EXPECT_TRUE(smoothed.Applied());
+  EXPECT_NEAR(smoothed.noise, threshold, 0.25 * threshold);
+}
+
 TEST(SmoothNoisyPositions, KeepsTheEdgesOfANoisyCubeSharp) {
   Oriented cube = Cube(40);  // spacing 0.05
   const double sigma = 0.015;

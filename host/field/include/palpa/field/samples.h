@@ -117,7 +117,9 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell);
 
 /// What SmoothNoisyPositions found and did.
 struct NoiseSmoothing {
-  double noise = 0;       ///< median RMS height residual of the samples' quadric fits, units of the positions
+  double noise = 0;       ///< the position noise (RMS, units of the positions): the residual's part that
+                          ///< does not grow from the 16- to the `neighbours`-sample fits
+  double residual = 0;    ///< median RMS height residual of the samples' 16-sample quadric fits, same units
   std::size_t moved = 0;  ///< samples moved (0 when the noise was below the threshold)
   double mean_move = 0;   ///< mean |move| over the moved samples, all passes, units of the positions
   bool Applied() const { return moved > 0; }
@@ -128,12 +130,14 @@ struct NoiseSmoothing {
 /// nearest `neighbours` samples whose normals agree with it (n_j . n_i >= 0.8: the faces of a sharp
 /// edge and the two sides of a thin wall are never mixed, unlike CGAL's jet_smooth_point_set,
 /// which rounds fandisk's edges, or bilateral_smooth_point_set, which shrinks curved parts), by
-/// least squares on the heights, and measures the fit's RMS residual. When the median residual
-/// exceeds `threshold` (units of the positions; clean samples, even coarse ones, stay far below)
-/// every sample with at least 8 agreeing neighbours moves along its normal onto its fit, in
-/// `passes` Jacobi passes (each fits the previous pass's positions; the noise is measured on the
-/// first, over the 16 nearest, where a smooth surface is a quadric and only noise is left).
-/// Normals are kept. Shapes: positions and normals of equal length, normals unit. Deterministic.
+/// least squares on the heights, and measures the fit's RMS residual over the 16 nearest and over
+/// all `neighbours`. Noise leaves the same residual at both scales, a shape finer than the fit
+/// (sparse samples of a detailed surface) a growing one: the noise is the part that does not grow
+/// (see `NoiseSmoothing::noise`). When it exceeds `threshold` (units of the positions; clean
+/// samples, sparse ones included, stay far below) every sample with at least 8 agreeing
+/// neighbours moves along its normal onto its fit, by at most 2.5 x the 16-sample residual, in
+/// `passes` Jacobi passes (each fits the previous pass's positions). Normals are kept. Shapes:
+/// positions and normals of equal length, normals unit. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
                                     double threshold, int passes = 2);
