@@ -528,6 +528,35 @@ TEST(SmoothNoisyPositions, TellsASparseDetailedSurfaceFromNoise) {
   EXPECT_NEAR(smoothed.noise, threshold, 0.25 * threshold);
 }
 
+// A thin noisy cylinder (a leg, a horn): the 16 nearest of a sample wrap round it, fewer than 9
+// with its normal, but its 48 nearest hold enough along the axis, and it is moved.
+TEST(SmoothNoisyPositions, MovesSamplesOfAThinPart) {
+  constexpr double kRadius = 0.015, kLength = 4.0, kSigma = 0.001;
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, kSigma);
+  Oriented cylinder;
+  for (int i = 0; i < 6000; ++i) {
+    const double a = 2 * std::numbers::pi * unit(rng);
+    const V3 normal(std::cos(a), std::sin(a), 0);
+    cylinder.positions.push_back(kRadius * normal + V3(0, 0, kLength * unit(rng)) +
+                                 V3(gauss(rng), gauss(rng), gauss(rng)));
+    cylinder.normals.push_back(normal);
+  }
+  const auto rms_radial = [&] {
+    double s = 0.0;
+    for (const V3& p : cylinder.positions) s += std::pow(p.head<2>().norm() - kRadius, 2);
+    return std::sqrt(s / static_cast<double>(cylinder.positions.size()));
+  };
+  const double before = rms_radial();
+  const NoiseSmoothing done = SmoothNoisyPositions(cylinder.positions, cylinder.normals, 48, 0.5 * kSigma);
+  ASSERT_TRUE(done.Applied());
+  // Measured: 5,974 of 6,000 moved, radial RMS 0.00100 -> 0.00043; with 8 of the 16 nearest
+  // required, 5,205 and 0.00054.
+  EXPECT_GT(done.moved, cylinder.positions.size() * 99 / 100) << done.moved;
+  EXPECT_LT(rms_radial(), before / 2.0);
+}
+
 TEST(SmoothNoisyPositions, KeepsTheEdgesOfANoisyCubeSharp) {
   Oriented cube = Cube(40);  // spacing 0.05
   const double sigma = 0.015;

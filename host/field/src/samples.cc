@@ -432,7 +432,7 @@ NoiseSmoothing SmoothingPass(std::vector<Eigen::Vector3d>& positions, const std:
   if (!(out.noise > threshold)) return out;
   const double noise = std::min(out.residual, cap);
   for (std::size_t i = 0; i < n; ++i) {
-    if (residual[i] < 0) continue;
+    if (wide_residual[i] < 0) continue;
     // A move beyond kMaxMoveNoise x the noise is the shape (a detail finer than the fit), not noise.
     positions[i] += std::clamp(height[i], -kMaxMoveNoise * noise, kMaxMoveNoise * noise) * normals[i];
     ++out.moved;

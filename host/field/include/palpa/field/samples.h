@@ -134,8 +134,8 @@ struct NoiseSmoothing {
 /// all `neighbours`. Noise leaves the same residual at both scales, a shape finer than the fit
 /// (sparse samples of a detailed surface) a growing one: the noise is the part that does not grow
 /// (see `NoiseSmoothing::noise`). When it exceeds `threshold` (units of the positions; clean
-/// samples, sparse ones included, stay far below) every sample with at least 8 agreeing
-/// neighbours moves along its normal onto its fit, by at most 2.5 x the 16-sample residual, in
+/// samples, sparse ones included, stay far below) every sample with at least 8 agreeing among its
+/// `neighbours` nearest moves along its normal onto their fit, by at most 2.5 x the 16-sample residual, in
 /// `passes` Jacobi passes (each fits the previous pass's positions). Normals are kept. Shapes:
 /// positions and normals of equal length, normals unit. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
