@@ -6,6 +6,7 @@
 #include <random>
 
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include "palpa/field/orientation.h"
 #include "palpa/field/point_io.h"
@@ -77,6 +78,29 @@ TEST(CheckOrientation, FlippedNormalsAreFound) {
 // cube.pwn, read as it is: on each face of its bounding box, the sign of n.(outward face normal)
 // of the points lying on that face. The file's normals point to +x, +y or +z whatever the face,
 // so they point inward on the three low faces: the data, not our reading, is inconsistent.
+// A closed plate thinner than its sample spacing, tilted: at its rims the farthest samples along
+// a direction are on both faces, half of them on the back face, whose correct normals point away.
+// That is no evidence of flipped normals; one face flipped still is.
+TEST(CheckOrientation, TheBackFaceOfAThinWallIsNotInward) {
+  constexpr double kHalf = 1.0, kThick = 0.03, kTilt = 1.2;  // spacing ~0.045; tilt in radians
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const Eigen::Matrix3d turn = Eigen::AngleAxisd(kTilt, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  std::vector<Eigen::Vector3d> p, n;
+  for (int i = 0; i < 4000; ++i) {  // the two large faces; the rims (1 % of the area) left out
+    const double side = i % 2 == 0 ? 1.0 : -1.0;
+    p.push_back(turn * Eigen::Vector3d(kHalf * unit(rng), kHalf * unit(rng), side * kThick / 2));
+    n.push_back(turn * Eigen::Vector3d(0, 0, side));
+  }
+  const OrientationReport r = CheckOrientation(p, n);
+  // Measured: 0 directions; 3 without the thin-wall exemption.
+  EXPECT_EQ(r.inward_support_directions, 0) << r.Describe();
+  EXPECT_FALSE(r.Inconsistent()) << r.Describe();
+  for (std::size_t i = 1; i < n.size(); i += 2) n[i] = -n[i];  // the back face's normals flipped
+  const OrientationReport flipped = CheckOrientation(p, n);
+  EXPECT_TRUE(flipped.Inconsistent()) << flipped.Describe();
+}
+
 TEST(CheckOrientation, CubePwnNormalsPointInwardOnTheLowFaces) {
   const auto points = ReadPoints(DataFile("cube.pwn"));
   ASSERT_TRUE(points.has_value());

@@ -56,29 +56,49 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
   const std::size_t n = positions.size();
   if (n < 2 || normals.size() != n) return report;
 
+  const PointCloud cloud{&positions};
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const std::size_t k = std::min(kNeighbours + 1, n);
+
   // Support test.
+  // The back face of a thin wall (an ear, a fin) at the extreme: its normal points away from u,
+  // correctly, and the front face lies behind it (off its tangent plane by more than 10 degrees),
+  // facing the other way; a flipped normal's opposite neighbours lie on its own sheet, on or in
+  // front of its tangent plane at an extreme. CGAL's bull with 1,000 exact samples: 2 directions
+  // inward without this.
+  const auto behind_a_thin_wall = [&](std::size_t i) {
+    std::array<std::size_t, kNeighbours + 1> idx{};
+    std::array<double, kNeighbours + 1> d2{};
+    const std::size_t got = tree.knnSearch(positions[i].data(), k, idx.data(), d2.data());
+    for (std::size_t m = 0; m < got; ++m) {
+      const V3 chord = positions[idx[m]] - positions[i];
+      if (normals[i].dot(normals[idx[m]]) < kOppositeCos && chord.dot(normals[i]) < -kFlatSin * chord.norm())
+        return true;
+    }
+    return false;
+  };
   std::vector<std::pair<double, std::size_t>> along(n);
   for (int i = -1; i <= 1; ++i)
     for (int j = -1; j <= 1; ++j)
-      for (int k = -1; k <= 1; ++k) {
-        if (i == 0 && j == 0 && k == 0) continue;
-        const V3 u = V3(i, j, k).normalized();
+      for (int kk = -1; kk <= 1; ++kk) {
+        if (i == 0 && j == 0 && kk == 0) continue;
+        const V3 u = V3(i, j, kk).normalized();
         for (std::size_t p = 0; p < n; ++p) along[p] = {-u.dot(positions[p]), p};  // ties: lower index first
         const std::size_t top = std::min(kSupportPoints, n);
         std::partial_sort(along.begin(), along.begin() + static_cast<std::ptrdiff_t>(top), along.end());
         std::size_t inward = 0;
         // Clearly inward only: the rim of an open scan, or an exact normal on a face parallel to u,
         // is perpendicular to u and says nothing (issue 20: the check misfired on both).
-        for (std::size_t t = 0; t < top; ++t) inward += normals[along[t].second].dot(u) < -kFlatSin ? 1u : 0u;
+        for (std::size_t t = 0; t < top; ++t) {
+          const std::size_t p = along[t].second;
+          inward += normals[p].dot(u) < -kFlatSin && !behind_a_thin_wall(p) ? 1u : 0u;
+        }
         ++report.support_directions;
         report.inward_support_directions += 2 * inward > top ? 1 : 0;
       }
 
   // Flat-pair test, each unordered pair once (from its lower index), so the counts do not depend
   // on the tree or the thread count.
-  const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  const std::size_t k = std::min(kNeighbours + 1, n);
   std::vector<std::uint8_t> flipped_point(n, 0);
   std::vector<std::pair<std::size_t, std::size_t>> counts(n, {0u, 0u});  // per point: flat, flipped
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
