@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <numbers>
 #include <random>
 #include <sstream>
 #include <string>
@@ -309,6 +310,30 @@ TEST_F(Cli, OpenScanIsReportedOpen) {
   }
   const std::string cap_in = Write("cap.xyz", cap);
   ExpectReportedOpen(Palpa("build " + cap_in + " -o " + Path("cap.palpa") + " --cells 64 -q"));
+  // The area it closed, with the equator's samples kept (z >= 0: the closure is then round): the
+  // sphere's (r = 10) lower half beyond the cover distance d of the equator's samples,
+  // 2 pi r^2 (1 - sin(2 asin(d / 2r))) (tests/host/coverage_test.cc), at any resolution (the
+  // brick count it replaced gave 409.5 model units^2 at 64 cells, fewer finer).
+  std::ifstream again(std::string(PALPA_DATA_DIR) + "/sphere926.pwn");
+  std::string half;
+  for (std::string line; std::getline(again, line);) {
+    double x = 0, y = 0, z = 0;
+    if (std::sscanf(line.c_str(), "%lf %lf %lf", &x, &y, &z) == 3 && z >= 0) half += line + "\n";
+  }
+  const std::string half_in = Write("half.xyz", half);
+  for (const int cells : {64, 128}) {
+    const Outcome open = Palpa("build " + half_in + " -o " + Path("half.palpa") + " --cells " + std::to_string(cells));
+    double mm2 = 0, units2 = 0, d_mm = 0;
+    const std::size_t at = open.out.find(") over ");
+    ASSERT_NE(at, std::string::npos) << open.out;
+    ASSERT_EQ(std::sscanf(open.out.c_str() + at, ") over %lf mm^2 (%lf model units^2) more than %lf mm", &mm2, &units2,
+                          &d_mm),
+              3)
+        << open.out;
+    const double d = d_mm / std::sqrt(mm2 / units2);  // model units
+    const double expected = 2 * std::numbers::pi * 100 * (1 - std::sin(2 * std::asin(d / 20)));
+    EXPECT_NEAR(units2, expected, 0.06 * expected) << cells << " cells: " << open.out;
+  }
   const Outcome closed =
       Palpa("build " + std::string(PALPA_DATA_DIR) + "/sphere926.pwn -o " + Path("s.palpa") + " --cells 64 -q");
   ASSERT_EQ(closed.code, 0) << closed.out;

@@ -15,6 +15,7 @@
 #include "grid_faces.h"
 #include "palpa/blob/blob.h"
 #include "palpa/field/build.h"
+#include "palpa/field/coverage.h"
 #include "palpa/field/normals.h"
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
@@ -246,12 +247,18 @@ int RunBuild(const BuildArgs& args) {
                    : "");
   }
   if (open_scan) {
-    const double closed = built.hermite.closed_area_m2 / (transform.scale * transform.scale);  // model units^2
+    // The closing surface's area: every crossing of the zero surface farther than 3 sample
+    // spacings from every sample (the winding number's own count sees only bricks no sample
+    // reaches, a lower bound).
+    const field::Coverage coverage = field::MeasureCoverage(built.field, device.positions);
+    const double closed_m2 = coverage.uncovered_area_m2;
+    const double closed = closed_m2 / (transform.scale * transform.scale);  // model units^2
     fmt::print(stderr,
                "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it (by the "
                "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
-               "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) away from every sample{}\n",
-               args.points, built.hermite.closed_area_m2 * 1e6, closed,
+               "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
+               "sample (3 sample spacings){}\n",
+               args.points, closed_m2 * 1e6, closed, coverage.min_distance_m * 1e3,
                (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "
                                     "closed side",
                                     built.grid_grown_from[0], built.grid_grown_from[1], built.grid_grown_from[2],

@@ -1,0 +1,131 @@
+#include "palpa/field/coverage.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include "point_cloud.h"
+
+namespace palpa::field {
+namespace {
+
+using V3 = Eigen::Vector3d;
+
+constexpr double kCoverSpacings = 3.0;
+
+struct Count {
+  std::size_t crossings = 0;
+  std::size_t uncovered = 0;
+};
+
+double MedianSpacing(const detail::KdTree& tree, const std::vector<V3>& samples) {
+  if (samples.size() < 2) return 0.0;
+  std::vector<double> nearest(samples.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 1024), [&](const auto& r) {
+    std::array<std::size_t, 2> idx{};
+    std::array<double, 2> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(samples[i].data(), 2, idx.data(), d2.data());
+      nearest[i] = got == 2 ? std::sqrt(d2[1]) : 0.0;
+    }
+  });
+  std::nth_element(nearest.begin(), nearest.begin() + static_cast<std::ptrdiff_t>(nearest.size() / 2), nearest.end());
+  return nearest[nearest.size() / 2];
+}
+
+}  // namespace
+
+Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& samples) {
+  Coverage out;
+  const GridSpec& grid = field.grid();
+  const double h = grid.voxel_m;
+  if (samples.empty() || !(h > 0.0)) return out;
+  const detail::PointCloud cloud{&samples};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  out.min_distance_m = std::max(kCoverSpacings * MedianSpacing(tree, samples), h);
+  const double min_d2 = out.min_distance_m * out.min_distance_m;
+  constexpr int kB = SparseField::kBrick;
+  const std::array<int, 3>& bd = field.brick_dims();
+  const std::size_t bricks =
+      static_cast<std::size_t>(bd[0]) * static_cast<std::size_t>(bd[1]) * static_cast<std::size_t>(bd[2]);
+  const Count total = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, bricks, 16), Count{},
+      [&](const auto& r, Count c) {
+        // One crossing test: the edge from node (i, j, k), phi `here`, one step along axis `s`.
+        const auto edge = [&](int i, int j, int k, double here, int s, double there) {
+          if ((here <= 0.0) == (there <= 0.0)) return;
+          ++c.crossings;
+          const double t = here / (here - there);  // the zero along the edge, in [0, 1]
+          V3 p = grid.origin_m + h * V3(i, j, k);
+          p[s] += h * t;
+          std::size_t nearest = 0;
+          double d2 = 0.0;
+          tree.knnSearch(p.data(), 1, &nearest, &d2);
+          if (d2 > min_d2) ++c.uncovered;
+        };
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+          const std::array<int, 3> bc = field.BrickCoords(b);
+          const std::array<int, 3> base{bc[0] * kB, bc[1] * kB, bc[2] * kB};
+          const float* values = field.BrickValues(b);
+          if (values == nullptr) {
+            // Uniform: no edge crosses inside it; across a face, only into a brick that is not
+            // uniform with the same sign.
+            for (int s = 0; s < 3; ++s) {
+              std::array<int, 3> next = bc;
+              ++next[static_cast<std::size_t>(s)];
+              if (next[static_cast<std::size_t>(s)] >= bd[static_cast<std::size_t>(s)]) continue;
+              if (field.Slot(field.BrickIndex(next[0], next[1], next[2])) == field.Slot(b)) continue;
+              const double here = field.Slot(b) == SparseField::kUniformInside ? -grid.band_voxels : grid.band_voxels;
+              const int u = (s + 1) % 3, v = (s + 2) % 3;
+              for (int x = 0; x < kB; ++x)
+                for (int y = 0; y < kB; ++y) {
+                  std::array<int, 3> node = base;
+                  node[static_cast<std::size_t>(s)] += kB - 1;
+                  node[static_cast<std::size_t>(u)] += x;
+                  node[static_cast<std::size_t>(v)] += y;
+                  std::array<int, 3> far = node;
+                  ++far[static_cast<std::size_t>(s)];
+                  if (far[0] >= grid.dims[0] || far[1] >= grid.dims[1] || far[2] >= grid.dims[2]) continue;
+                  edge(node[0], node[1], node[2], here, s, field.Value(far[0], far[1], far[2]));
+                }
+            }
+            continue;
+          }
+          for (int a = 0; a < kB; ++a)
+            for (int e = 0; e < kB; ++e)
+              for (int f = 0; f < kB; ++f) {
+                const int i = base[0] + a, j = base[1] + e, k = base[2] + f;
+                if (i >= grid.dims[0] || j >= grid.dims[1] || k >= grid.dims[2]) continue;
+                const double here = values[(a * kB + e) * kB + f];
+                const std::array<int, 3> local{a, e, f};
+                for (int s = 0; s < 3; ++s) {
+                  std::array<int, 3> far{i, j, k};
+                  ++far[static_cast<std::size_t>(s)];
+                  if (far[static_cast<std::size_t>(s)] >= grid.dims[static_cast<std::size_t>(s)]) continue;
+                  std::array<int, 3> near = local;
+                  ++near[static_cast<std::size_t>(s)];
+                  const double there = near[static_cast<std::size_t>(s)] < kB
+                                           ? values[(near[0] * kB + near[1]) * kB + near[2]]
+                                           : field.Value(far[0], far[1], far[2]);
+                  edge(i, j, k, here, s, there);
+                }
+              }
+        }
+        return c;
+      },
+      [](Count x, const Count& y) {
+        x.crossings += y.crossings;
+        x.uncovered += y.uncovered;
+        return x;
+      });
+  out.total_area_m2 = static_cast<double>(total.crossings) * h * h / 1.5;
+  out.uncovered_area_m2 = static_cast<double>(total.uncovered) * h * h / 1.5;
+  return out;
+}
+
+}  // namespace palpa::field
