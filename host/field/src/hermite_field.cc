@@ -608,7 +608,8 @@ std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, con
   const std::size_t n = positions.size();
   if (packing.radii.size() != n || ball_normals.size() != n || spacing.size() != n || n < 2) return 0;
   const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const KdTree tree(3, cloud,
+                    nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));  // order-free: sorted below
   const double max_disc = disc_spacings * *std::max_element(spacing.begin(), spacing.end());
   std::vector<double> radii(n);
   tbb::enumerable_thread_specific<std::vector<std::size_t>> crossing_tls;
@@ -914,6 +915,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
                    sorted_spacing.begin() + static_cast<std::ptrdiff_t>(sorted_spacing.size() / 2),
                    sorted_spacing.end());
   const double trust = std::max(kTrustVoxels * h, kTrustSpacings * sorted_spacing[sorted_spacing.size() / 2]);
+  // For the order-free searches below: any sample within trust, the nearest distance.
+  const PointCloud cloud{&positions};
+  const KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
@@ -960,7 +964,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             if ((wi[static_cast<std::size_t>(e)] >= 0.5f) == (x <= 0.0f)) continue;
             const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
             AnyWithin near(trust);  // the nearest sample within trust?
-            tree.findNeighbors(near, p.data(), nanoflann::SearchParams());
+            wide.findNeighbors(near, p.data(), nanoflann::SearchParams());
             if (near.found()) continue;
             node.push_back((a * kB + c) * kB + e);
             at.push_back(p);
@@ -977,7 +981,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
         std::size_t idx = 0;
         double d2 = 0.0;
-        tree.knnSearch(p.data(), 1, &idx, &d2);
+        wide.knnSearch(p.data(), 1, &idx, &d2);
         const double ds = std::sqrt(d2);
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
