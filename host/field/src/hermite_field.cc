@@ -422,30 +422,42 @@ float EvaluateBlock(const Model& model, const Block& b, float x, float y, float 
   return out[0];
 }
 
-// kAll: the parent lists are all candidates in order (the loops then run over contiguous arrays
-// and vectorise).
-template <bool kAll>
-void Cull(const Scratch& s, const Lists& parent, float cx, float cy, float cz, float rho, float band, Lists& child) {
+// A parent's candidates in its lists' order, contiguous: the Scratch's own arrays for the list of
+// all, a Block (Pack) for a culled list; so that the loops over them vectorise.
+struct Candidates {
+  const float *px, *py, *pz, *ix, *iy, *iz, *ir, *ox, *oy, *oz, *orad;
+};
+
+Candidates AllOf(const Scratch& s) {
+  return {s.px.data(), s.py.data(), s.pz.data(), s.ix.data(), s.iy.data(),  s.iz.data(),
+          s.ir.data(), s.ox.data(), s.oy.data(), s.oz.data(), s.orad.data()};
+}
+
+Candidates InOrder(const Block& b) {
+  return {b.px.data(), b.py.data(), b.pz.data(), b.ix.data(), b.iy.data(),  b.iz.data(),
+          b.ir.data(), b.ox.data(), b.oy.data(), b.oz.data(), b.orad.data()};
+}
+
+void Cull(const Candidates& s, const Lists& parent, float cx, float cy, float cz, float rho, float band, Lists& child) {
   const float keep = 2.0f * rho + kCullSlackVoxels;
   // Balls first (f = |s - c| - r, d = |s - c|): a block the bracket alone decides needs no lists.
   struct BallsAtS {
     std::array<float, kBrickCandidates> f, d;
   };
   BallsAtS bi, bo;
-  const auto balls = [&](const std::array<std::uint8_t, kBrickCandidates>& list, std::size_t n, const float* x,
-                         const float* y, const float* z, const float* radius, BallsAtS& out) {
+  const auto balls = [&](std::size_t n, const float* x, const float* y, const float* z, const float* radius,
+                         BallsAtS& out) {
     float lowest = std::numeric_limits<float>::infinity();
     for (std::size_t a = 0; a < n; ++a) {
-      const std::size_t m = kAll ? a : list[a];
-      const float dx = cx - x[m], dy = cy - y[m], dz = cz - z[m];
+      const float dx = cx - x[a], dy = cy - y[a], dz = cz - z[a];
       out.d[a] = std::sqrt(dx * dx + dy * dy + dz * dz);
-      out.f[a] = out.d[a] - radius[m];
+      out.f[a] = out.d[a] - radius[a];
     }
     for (std::size_t a = 0; a < n; ++a) lowest = std::min(lowest, out.f[a]);
     return lowest;
   };
-  const float in_at_s = balls(parent.in, parent.nin, s.ix.data(), s.iy.data(), s.iz.data(), s.ir.data(), bi);
-  const float out_at_s = balls(parent.out, parent.nout, s.ox.data(), s.oy.data(), s.oz.data(), s.orad.data(), bo);
+  const float in_at_s = balls(parent.nin, s.ix, s.iy, s.iz, s.ir, bi);
+  const float out_at_s = balls(parent.nout, s.ox, s.oy, s.oz, s.orad, bo);
   // lo = min(-f_out, f_in) - slack >= band everywhere, or hi = max(-f_out, f_in) + slack <= -band.
   const float margin = band + kBracketSlackVoxels + kCullSlackVoxels;
   child.certified = 0;
@@ -466,31 +478,28 @@ void Cull(const Scratch& s, const Lists& parent, float cx, float cy, float cz, f
     std::size_t lowest = 0;
     while (lowest < n && at.f[lowest] != fb) ++lowest;
     if (lowest == n) return;
-    const std::size_t mb = kAll ? lowest : list[lowest];
     const float db = at.d[lowest];
-    const float ubx = (cx - x[mb]) / db, uby = (cy - y[mb]) / db, ubz = (cz - z[mb]) / db;
+    const float ubx = (cx - x[lowest]) / db, uby = (cy - y[lowest]) / db, ubz = (cz - z[lowest]) / db;
     const float turn_b = 2.0f * rho / std::max(db - rho, 1e-6f);
     for (std::size_t a = 0; a < n; ++a) {
       const float gap = at.f[a] - fb;
       if (gap > keep) continue;
       if (gap > kCullSlackVoxels) {
-        const std::size_t m = kAll ? a : list[a];
         const float d = at.d[a];
-        const float ex = (cx - x[m]) / d - ubx, ey = (cy - y[m]) / d - uby, ez = (cz - z[m]) / d - ubz;
+        const float ex = (cx - x[a]) / d - ubx, ey = (cy - y[a]) / d - uby, ez = (cz - z[a]) / d - ubz;
         const float turn = std::sqrt(ex * ex + ey * ey + ez * ez) + 2.0f * rho / std::max(d - rho, 1e-6f) + turn_b;
         if (gap > rho * turn + kCullSlackVoxels) continue;
       }
       to[nto++] = list[a];
     }
   };
-  select(parent.in, parent.nin, s.ix.data(), s.iy.data(), s.iz.data(), bi, in_at_s, child.in, child.nin);
-  select(parent.out, parent.nout, s.ox.data(), s.oy.data(), s.oz.data(), bo, out_at_s, child.out, child.nout);
+  select(parent.in, parent.nin, s.ix, s.iy, s.iz, bi, in_at_s, child.in, child.nin);
+  select(parent.out, parent.nout, s.ox, s.oy, s.oz, bo, out_at_s, child.out, child.nout);
 
   // Blend candidates: keep those within `keep` of the 4th-nearest distance.
   std::array<float, kBrickCandidates> dp;
   for (std::size_t a = 0; a < parent.np; ++a) {
-    const std::size_t m = kAll ? a : parent.p[a];
-    const float dx = cx - s.px[m], dy = cy - s.py[m], dz = cz - s.pz[m];
+    const float dx = cx - s.px[a], dy = cy - s.py[a], dz = cz - s.pz[a];
     dp[a] = std::sqrt(dx * dx + dy * dy + dz * dz);
   }
   std::array<float, kBlendPatches> best;
@@ -545,17 +554,18 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
   // Coordinates are summed in double and rounded once.
   const auto at = [&](std::size_t axis, double offset) { return static_cast<float>(corner[axis] + offset); };
   Lists l8, l4, l2;
-  Block block;
+  Block block8, block4, block;
   const auto fill = [&](int a0, int b0, int c0, int size, float v) {
     for (int a = a0; a < a0 + size; ++a)
       for (int b = b0; b < b0 + size; ++b)
         for (int c = c0; c < c0 + size; ++c) values[(a * kB + b) * kB + c] = v;
   };
-  Cull<true>(s, all, at(0, 3.5), at(1, 3.5), at(2, 3.5), rho8, band, l8);
+  Cull(AllOf(s), all, at(0, 3.5), at(1, 3.5), at(2, 3.5), rho8, band, l8);
   if (l8.certified != 0) {
     fill(0, 0, 0, kB, static_cast<float>(l8.certified) * band);
     return;
   }
+  Pack(s, l8, block8);
   for (int a4 = 0; a4 < kB; a4 += 4)
     for (int b4 = 0; b4 < kB; b4 += 4)
       for (int c4 = 0; c4 < kB; c4 += 4) {
@@ -563,15 +573,15 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
           fill(a4, b4, c4, 4, band);  // no grid nodes here (last brick of an axis)
           continue;
         }
-        Cull<false>(s, l8, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band, l4);
+        Cull(InOrder(block8), l8, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band, l4);
         if (l4.certified != 0) {
           fill(a4, b4, c4, 4, static_cast<float>(l4.certified) * band);
           continue;
         }
-        Pack(s, l4, block);
+        Pack(s, l4, block4);
         if (const float far = SurelyNear(model, l4, rho4, band)
                                   ? 0.0f
-                                  : FarValue(EvaluateBlock(model, block, at(0, a4 + 1.5), at(1, b4 + 1.5),
+                                  : FarValue(EvaluateBlock(model, block4, at(0, a4 + 1.5), at(1, b4 + 1.5),
                                                            at(2, c4 + 1.5), 4.0f * band),
                                              rho4, band);
             far != 0.0f) {
@@ -582,7 +592,7 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
         for (int a2 = a4; a2 < a4 + 4; a2 += 2)
           for (int b2 = b4; b2 < b4 + 4; b2 += 2)
             for (int c2 = c4; c2 < c4 + 4; c2 += 2) {
-              Cull<false>(s, l4, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band, l2);
+              Cull(InOrder(block4), l4, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band, l2);
               if (l2.certified != 0) {
                 fill(a2, b2, c2, 2, static_cast<float>(l2.certified) * band);
                 continue;
