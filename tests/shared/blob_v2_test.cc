@@ -5,9 +5,11 @@
 
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <optional>
 #include <random>
 #include <string>
+#include <vector>
 
 #include "analytic_fields.h"
 #include "palpa/blob/blob.h"
@@ -131,6 +133,33 @@ TEST(BlobV2, BrickSourceEncodesTheSameBytesAsTheDenseField) {
       EXPECT_GT(uniform_bricks, 10u);  // the test exercises that path
     }
   }
+}
+
+// The planes of bricks (and the free-space passes' slots) run through a ParallelFor one at a time
+// in reverse order, as threads may finish them: numbered on in plane order, the same bytes.
+TEST(BlobV2, PlanesEncodedInAnyOrderGiveTheSameBytes) {
+  SphereGrid g = MakeSphere({37, 29, 41}, {17.2, 13.9, 20.4}, 11.3);
+  const auto source = [&](std::array<std::uint32_t, 3> b,
+                          std::span<std::int32_t, kBrickNodes> q16) -> std::optional<std::int32_t> {
+    for (std::uint32_t a = 0; a < kBrick; ++a)
+      for (std::uint32_t c = 0; c < kBrick; ++c)
+        for (std::uint32_t e = 0; e < kBrick; ++e) {
+          const std::uint32_t i = b[0] * kBrick + a, j = b[1] * kBrick + c, k = b[2] * kBrick + e;
+          q16[(a * kBrick + c) * kBrick + e] = i < g.dims[0] && j < g.dims[1] && k < g.dims[2]
+                                                   ? g.q16[(std::size_t{i} * g.dims[1] + j) * g.dims[2] + k]
+                                                   : 0;
+        }
+    return std::nullopt;
+  };
+  std::vector<std::size_t> counts;  // the planes, then the slots of each free-space pass
+  const auto reversed =
+      EncodeV2(Meta(g), source, [&](std::size_t count, const std::function<void(std::size_t, std::size_t)>& body) {
+        counts.push_back(count);
+        for (std::size_t p = count; p-- > 0;) body(p, p + 1);
+      });
+  ASSERT_FALSE(counts.empty());
+  EXPECT_EQ(counts.front(), (g.dims[0] + kBrick - 1) / kBrick);
+  EXPECT_EQ(reversed, EncodeV2(Meta(g), g.q16));
 }
 
 TEST(BlobV2, HeaderFieldOffsetsMatchTheSpec) {

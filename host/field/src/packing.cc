@@ -127,7 +127,9 @@ std::vector<double> PackingRadii(const std::vector<Eigen::Vector3d>& positions,
   const double extent = LongestSide(positions);
   const double coincident_sq = CoincidentSquared(extent);
   const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  // The radius is the minimum over every sample, whichever the tree visits first (its k-nearest
+  // searches only bound the last search's ball).
+  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   const std::size_t k = std::min(kNeighbours, n);
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const tbb::blocked_range<std::size_t>& range) {

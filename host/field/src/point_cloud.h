@@ -27,4 +27,11 @@ struct PointCloud {
 using KdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
 
+// Leaf size for searches whose result does not depend on the order the tree visits samples in
+// (a minimum, a list sorted afterwards, whether any sample lies within a radius, the nearest
+// distance): the packing's and the guard's wide balls visit fewer nodes than with leaves of 10
+// (kitten, 300 cells, one thread: 69 -> 59 ms and 71 -> 65 ms). The k-nearest searches keep 10:
+// a tie at the kth distance goes to the sample visited first, so their results follow the tree.
+inline constexpr std::size_t kRangeLeaf = 24;
+
 }  // namespace palpa::field::detail

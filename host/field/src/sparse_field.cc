@@ -148,9 +148,20 @@ float* SparseField::Allocate(std::size_t brick) {
 }
 
 void SparseField::AllocateAll(const std::vector<std::uint8_t>& active) {
+  // Slots in brick order as Allocate gives them, then the values filled in parallel.
+  const auto band = static_cast<float>(grid_.band_voxels);
+  std::vector<std::pair<std::int32_t, float>> fresh;  // slot, fill
   for (std::size_t b = 0; b < slots_.size(); ++b) {
-    if (active[b] != 0) Allocate(b);
+    if (active[b] == 0 || slots_[b] >= 0) continue;
+    const float fill = slots_[b] == kUniformInside ? -band : band;
+    if (stored_ % kPageBricks == 0) pages_.emplace_back(kPageBricks * kBrickNodes);
+    slots_[b] = static_cast<std::int32_t>(stored_++);
+    fresh.emplace_back(slots_[b], fill);
   }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fresh.size(), 16), [&](const auto& r) {
+    for (std::size_t f = r.begin(); f != r.end(); ++f)
+      std::fill_n(Stored(fresh[f].first), kBrickNodes, fresh[f].second);
+  });
 }
 
 float SparseField::Value(int i, int j, int k) const {

@@ -2,8 +2,12 @@
 
 #include <array>
 #include <cstring>
+#include <functional>
 #include <span>
 #include <utility>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 namespace palpa::field {
 
@@ -30,10 +34,16 @@ std::vector<std::byte> ToBlob(SparseField field, const blob::BlobMeta& meta, con
     m2.meta = meta;
     m2.band_inside = layout.band_inside;
     m2.band_outside = layout.band_outside;
+    // The planes of bricks on TBB's threads: encoding was the build's longest serial stage.
     return blob::EncodeV2(
-        m2, [field = std::move(field)](std::array<std::uint32_t, 3> b, std::span<std::int32_t, blob::kBrickNodes> q16) {
+        m2,
+        [field = std::move(field)](std::array<std::uint32_t, 3> b, std::span<std::int32_t, blob::kBrickNodes> q16) {
           return field.BrickQ16(
               field.BrickIndex(static_cast<int>(b[0]), static_cast<int>(b[1]), static_cast<int>(b[2])), q16);
+        },
+        [](std::size_t count, const std::function<void(std::size_t, std::size_t)>& body) {
+          tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count),
+                            [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
         });
   }
   // v1: the header as blob::Encode writes it, the payload written once into the output.

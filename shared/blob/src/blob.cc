@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <limits>
 
 namespace palpa::blob {
@@ -417,7 +418,8 @@ constexpr std::int64_t AxisGap2(std::int64_t d) {
 // cells touching it to the cells touching any "near" slot (not free space), by three separable
 // min-plus passes with the per-axis gap above. Window: beyond 17 slots on any axis the gap is
 // ≥ 135 voxels, above any Q7.8 value, so the cap stands.
-std::vector<std::int64_t> FreeSpaceDistance2(const std::array<std::uint32_t, 3>& bd, const std::vector<bool>& near) {
+std::vector<std::int64_t> FreeSpaceDistance2(const std::array<std::uint32_t, 3>& bd, const std::vector<bool>& near,
+                                             const ParallelFor& parallel_for) {
   constexpr std::int64_t kInf = std::numeric_limits<std::int64_t>::max() / 4;
   constexpr int kWindow = 17;
   const std::size_t n = near.size();
@@ -427,18 +429,21 @@ std::vector<std::int64_t> FreeSpaceDistance2(const std::array<std::uint32_t, 3>&
   for (std::size_t axis = 0; axis < 3; ++axis) {
     tmp = d;
     const auto len = static_cast<std::int64_t>(bd[axis]);
-    for (std::size_t s = 0; s < n; ++s) {
-      const auto pos = static_cast<std::int64_t>((s / stride[axis]) % bd[axis]);
-      std::int64_t best = kInf;
-      for (std::int64_t off = -kWindow; off <= kWindow; ++off) {
-        const std::int64_t q = pos + off;
-        if (q < 0 || q >= len) continue;
-        const std::int64_t v =
-            tmp[static_cast<std::size_t>(static_cast<std::int64_t>(s) + off * static_cast<std::int64_t>(stride[axis]))];
-        if (v < kInf) best = std::min(best, v + AxisGap2(off));
+    // Each slot from the previous pass only: any split of the slots gives the same values.
+    parallel_for(n, [&](std::size_t first, std::size_t last) {
+      for (std::size_t s = first; s < last; ++s) {
+        const auto pos = static_cast<std::int64_t>((s / stride[axis]) % bd[axis]);
+        std::int64_t best = kInf;
+        for (std::int64_t off = -kWindow; off <= kWindow; ++off) {
+          const std::int64_t q = pos + off;
+          if (q < 0 || q >= len) continue;
+          const std::int64_t v = tmp[static_cast<std::size_t>(static_cast<std::int64_t>(s) +
+                                                              off * static_cast<std::int64_t>(stride[axis]))];
+          if (v < kInf) best = std::min(best, v + AxisGap2(off));
+        }
+        d[s] = best;
       }
-      d[s] = best;
-    }
+    });
   }
   return d;
 }
@@ -448,6 +453,11 @@ std::uint32_t Uniform(std::int16_t phi) { return kSlotEmpty | static_cast<std::u
 }  // namespace
 
 std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
+  return EncodeV2(m, std::move(bricks),
+                  [](std::size_t count, const std::function<void(std::size_t, std::size_t)>& body) { body(0, count); });
+}
+
+std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks, const ParallelFor& parallel_for) {
   HeaderV2 h{};
   h.magic = kMagic;
   h.version = kVersion2;
@@ -474,87 +484,107 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
   // Q16.16 -> Q7.8 within the band: nearest, ties up.
   const auto quantise = [&](std::int32_t v) { return static_cast<std::int16_t>((std::clamp(v, lo, hi) + 128) >> 8); };
   const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
-  std::vector<std::uint32_t> index(n_slots), tables;
-  // Stored octants, in order, in chunks that never move: a vector grown by doubling held its old
-  // and new buffers at once, a third of the 1,200-cell kitten build's peak.
-  constexpr std::size_t kChunkOctants = 4096;
-  std::vector<std::vector<std::int16_t>> chunks;
-  std::size_t octants = 0;
-  std::array<std::int32_t, kBrickNodes> brick{};
-  std::size_t slot = 0;
-  for (std::uint32_t bi = 0; bi < h.brick_dims[0]; ++bi) {
-    for (std::uint32_t bj = 0; bj < h.brick_dims[1]; ++bj) {
-      for (std::uint32_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
-        // A brick its source calls uniform: every octant with grid nodes holds this one value.
-        if (const std::optional<std::int32_t> all = bricks({bi, bj, bk}, brick)) {
-          index[slot] = Uniform(quantise(*all));
-          continue;
-        }
-        std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
-        std::array<bool, 8> oct_uniform{}, oct_any{};
-        std::array<std::int16_t, 8> oct_phi{};
-        // Nodes of this brick inside the grid, per axis (8 but at the grid's far edges).
-        const std::array<std::size_t, 3> in = {std::min<std::size_t>(kBrick, dims[0] - bi * std::size_t{kBrick}),
-                                               std::min<std::size_t>(kBrick, dims[1] - bj * std::size_t{kBrick}),
-                                               std::min<std::size_t>(kBrick, dims[2] - bk * std::size_t{kBrick})};
-        for (std::size_t o = 0; o < 8; ++o) {
-          const std::size_t a0 = (o >> 2) * kOctant, b0 = ((o >> 1) & 1) * kOctant, c0 = (o & 1) * kOctant;
-          if (a0 >= in[0] || b0 >= in[1] || c0 >= in[2]) {
-            oct_uniform[o] = true;  // no grid node: a uniform 0 entry
+  std::vector<std::uint32_t> index(n_slots);
+  // Each plane of bricks (one bi) is encoded on its own, its stored bricks numbered from 0 and
+  // their octants from 0; the planes are then numbered on in order, so the bytes do not depend
+  // on how parallel_for splits them. A plane's octants are never moved once written: a vector
+  // grown by doubling held its old and new buffers at once, a third of the 1,200-cell kitten
+  // build's peak; a plane's is a small share of the whole.
+  struct Plane {
+    std::vector<std::uint32_t> tables;  // 8 a stored brick; octant entries numbered in the plane
+    std::vector<std::int16_t> octants;
+  };
+  std::vector<Plane> planes(h.brick_dims[0]);
+  const std::size_t plane_slots = std::size_t{h.brick_dims[1]} * h.brick_dims[2];
+  parallel_for(planes.size(), [&](std::size_t first, std::size_t last) {
+    std::array<std::int32_t, kBrickNodes> brick{};
+    for (std::size_t p = first; p < last; ++p) {
+      const auto bi = static_cast<std::uint32_t>(p);
+      Plane& plane = planes[p];
+      std::size_t slot = p * plane_slots;
+      for (std::uint32_t bj = 0; bj < h.brick_dims[1]; ++bj) {
+        for (std::uint32_t bk = 0; bk < h.brick_dims[2]; ++bk, ++slot) {
+          // A brick its source calls uniform: every octant with grid nodes holds this one value.
+          if (const std::optional<std::int32_t> all = bricks({bi, bj, bk}, brick)) {
+            index[slot] = Uniform(quantise(*all));
             continue;
           }
-          const std::int32_t* src = brick.data() + (a0 * kBrick + b0) * kBrick + c0;
-          std::int16_t* dst = oct[o].data();
-          const std::size_t na = std::min<std::size_t>(kOctant, in[0] - a0);
-          const std::size_t nb = std::min<std::size_t>(kOctant, in[1] - b0);
-          const std::size_t nc = std::min<std::size_t>(kOctant, in[2] - c0);
-          const std::int16_t q0 = quantise(src[0]);
-          bool same = true;
-          for (std::size_t a = 0; a < na; ++a)
-            for (std::size_t b = 0; b < nb; ++b)
-              for (std::size_t c = 0; c < nc; ++c) {
-                const std::int16_t q = quantise(src[(a * kBrick + b) * kBrick + c]);
-                dst[(a * kOctant + b) * kOctant + c] = q;
-                same = same && q == q0;
-              }
-          oct_any[o] = true;
-          oct_uniform[o] = same;
-          oct_phi[o] = q0;
-        }
-        // The brick is uniform if every octant with grid nodes is, with one value.
-        bool uniform = true;
-        std::int16_t brick_phi = 0;
-        bool have = false;
-        for (std::size_t o = 0; o < 8; ++o) {
-          if (!oct_any[o]) continue;
-          uniform = uniform && oct_uniform[o] && (!have || oct_phi[o] == brick_phi);
-          if (!have) brick_phi = oct_phi[o];
-          have = true;
-        }
-        if (uniform) {
-          index[slot] = Uniform(brick_phi);
-          continue;
-        }
-        index[slot] = static_cast<std::uint32_t>(tables.size() / 8);
-        for (std::size_t o = 0; o < 8; ++o) {
-          if (oct_uniform[o]) {
-            tables.push_back(Uniform(oct_phi[o]));  // an octant without grid nodes: 0
-          } else {
-            tables.push_back(static_cast<std::uint32_t>(octants));
-            if (octants % kChunkOctants == 0) chunks.emplace_back().reserve(kChunkOctants * kOctantNodes);
-            chunks.back().insert(chunks.back().end(), oct[o].begin(), oct[o].end());
-            ++octants;
+          std::array<std::array<std::int16_t, kOctantNodes>, 8> oct{};
+          std::array<bool, 8> oct_uniform{}, oct_any{};
+          std::array<std::int16_t, 8> oct_phi{};
+          // Nodes of this brick inside the grid, per axis (8 but at the grid's far edges).
+          const std::array<std::size_t, 3> in = {std::min<std::size_t>(kBrick, dims[0] - bi * std::size_t{kBrick}),
+                                                 std::min<std::size_t>(kBrick, dims[1] - bj * std::size_t{kBrick}),
+                                                 std::min<std::size_t>(kBrick, dims[2] - bk * std::size_t{kBrick})};
+          for (std::size_t o = 0; o < 8; ++o) {
+            const std::size_t a0 = (o >> 2) * kOctant, b0 = ((o >> 1) & 1) * kOctant, c0 = (o & 1) * kOctant;
+            if (a0 >= in[0] || b0 >= in[1] || c0 >= in[2]) {
+              oct_uniform[o] = true;  // no grid node: a uniform 0 entry
+              continue;
+            }
+            const std::int32_t* src = brick.data() + (a0 * kBrick + b0) * kBrick + c0;
+            std::int16_t* dst = oct[o].data();
+            const std::size_t na = std::min<std::size_t>(kOctant, in[0] - a0);
+            const std::size_t nb = std::min<std::size_t>(kOctant, in[1] - b0);
+            const std::size_t nc = std::min<std::size_t>(kOctant, in[2] - c0);
+            const std::int16_t q0 = quantise(src[0]);
+            bool same = true;
+            for (std::size_t a = 0; a < na; ++a)
+              for (std::size_t b = 0; b < nb; ++b)
+                for (std::size_t c = 0; c < nc; ++c) {
+                  const std::int16_t q = quantise(src[(a * kBrick + b) * kBrick + c]);
+                  dst[(a * kOctant + b) * kOctant + c] = q;
+                  same = same && q == q0;
+                }
+            oct_any[o] = true;
+            oct_uniform[o] = same;
+            oct_phi[o] = q0;
+          }
+          // The brick is uniform if every octant with grid nodes is, with one value.
+          bool uniform = true;
+          std::int16_t brick_phi = 0;
+          bool have = false;
+          for (std::size_t o = 0; o < 8; ++o) {
+            if (!oct_any[o]) continue;
+            uniform = uniform && oct_uniform[o] && (!have || oct_phi[o] == brick_phi);
+            if (!have) brick_phi = oct_phi[o];
+            have = true;
+          }
+          if (uniform) {
+            index[slot] = Uniform(brick_phi);
+            continue;
+          }
+          index[slot] = static_cast<std::uint32_t>(plane.tables.size() / 8);  // numbered on below
+          for (std::size_t o = 0; o < 8; ++o) {
+            if (oct_uniform[o]) {
+              plane.tables.push_back(Uniform(oct_phi[o]));  // an octant without grid nodes: 0
+            } else {
+              plane.tables.push_back(static_cast<std::uint32_t>(plane.octants.size() / kOctantNodes));
+              plane.octants.insert(plane.octants.end(), oct[o].begin(), oct[o].end());
+            }
           }
         }
       }
+      plane.tables.shrink_to_fit();  // the planes together hold no slack of their doubling
+      plane.octants.shrink_to_fit();
     }
-  }
+  });
   bricks = nullptr;  // every brick is read: free the source (and its field) before the output
+  // The planes' bricks and octants numbered on in plane order.
+  std::size_t brick_count = 0, octants = 0;
+  for (std::size_t p = 0; p < planes.size(); ++p) {
+    for (std::size_t slot = p * plane_slots; slot < (p + 1) * plane_slots; ++slot)
+      if ((index[slot] & kSlotEmpty) == 0) index[slot] += static_cast<std::uint32_t>(brick_count);
+    for (std::uint32_t& t : planes[p].tables)
+      if ((t & kSlotEmpty) == 0) t += static_cast<std::uint32_t>(octants);
+    brick_count += planes[p].tables.size() / 8;
+    octants += planes[p].octants.size() / kOctantNodes;
+  }
   if (m.free_space_bounds) {
     const std::uint32_t outside = Uniform(static_cast<std::int16_t>(m.band_outside * 256));
     std::vector<bool> near(n_slots);
     for (std::size_t s = 0; s < n_slots; ++s) near[s] = index[s] != outside;
-    const std::vector<std::int64_t> d2 = FreeSpaceDistance2(h.brick_dims, near);
+    const std::vector<std::int64_t> d2 = FreeSpaceDistance2(h.brick_dims, near, parallel_for);
     for (std::size_t s = 0; s < n_slots; ++s) {
       if (near[s]) continue;
       // floor(256·√d2) exactly: the double estimate, corrected by integer squares.
@@ -566,18 +596,20 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks) {
           Uniform(static_cast<std::int16_t>(std::min<std::int64_t>(32767, std::int64_t{m.band_outside} * 256 + r)));
     }
   }
-  h.brick_count = static_cast<std::uint32_t>(tables.size() / 8);
+  h.brick_count = static_cast<std::uint32_t>(brick_count);
   h.octant_count = static_cast<std::uint32_t>(octants);
   const std::uint64_t tables_at = kHeaderSizeV2 + 4 * slots;
   h.octants_offset = AlignUp(tables_at + kTableBytes * h.brick_count, kOctantAlign);
   h.payload_size = h.octants_offset - kHeaderSizeV2 + std::uint64_t{h.octant_count} * kOctantBytes;
   std::vector<std::byte> out(kHeaderSizeV2 + static_cast<std::size_t>(h.payload_size));  // zeroed padding
   std::memcpy(out.data() + kHeaderSizeV2, index.data(), 4 * index.size());
-  if (!tables.empty()) std::memcpy(out.data() + static_cast<std::size_t>(tables_at), tables.data(), 4 * tables.size());
-  std::size_t at = static_cast<std::size_t>(h.octants_offset);
-  for (const auto& chunk : chunks) {
-    std::memcpy(out.data() + at, chunk.data(), 2 * chunk.size());
-    at += 2 * chunk.size();
+  std::size_t tables_end = static_cast<std::size_t>(tables_at), at = static_cast<std::size_t>(h.octants_offset);
+  for (Plane& plane : planes) {
+    if (!plane.tables.empty()) std::memcpy(out.data() + tables_end, plane.tables.data(), 4 * plane.tables.size());
+    tables_end += 4 * plane.tables.size();
+    if (!plane.octants.empty()) std::memcpy(out.data() + at, plane.octants.data(), 2 * plane.octants.size());
+    at += 2 * plane.octants.size();
+    plane = {};  // freed as soon as copied
   }
   std::memcpy(out.data(), &h, sizeof h);
   const std::span<const std::byte> bytes(out);

@@ -6,6 +6,8 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <new>
 #include <optional>
 #include <span>
 #include <vector>
@@ -133,7 +135,20 @@ class SparseField {
   GridSpec grid_;
   std::array<int, 3> brick_dims_{};
   std::vector<std::int32_t> slots_;
-  std::vector<std::vector<float>> pages_;
+  // Pages are not zeroed: every brick handed out is filled first, and its first touch, page
+  // fault by page fault, is most of the cost of allocating (AllocateAll does it in parallel).
+  template <class T>
+  struct NoInit : std::allocator<T> {
+    template <class U>
+    struct rebind {
+      using other = NoInit<U>;
+    };
+    template <class U>
+    void construct(U* p) {
+      ::new (static_cast<void*>(p)) U;
+    }
+  };
+  std::vector<std::vector<float, NoInit<float>>> pages_;
   std::size_t stored_ = 0;  // bricks with values: slots 0 .. stored_ - 1
 };
 

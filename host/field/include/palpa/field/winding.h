@@ -74,7 +74,10 @@ class WindingNumber {
     double trace = 0;        // trace of `second`
     Eigen::Matrix3d second;  // sum a_i n_i (P_i - centre)^T
   };
-  std::int32_t BuildNode(std::uint32_t begin, std::uint32_t end);
+  // Nodes of the subtree over `count` points; builds node `id` over [begin, end) and its subtree
+  // (left child id + 1, then the right one after the left's subtree; large halves in parallel).
+  static std::uint32_t SubtreeNodes(std::uint32_t count);
+  void BuildNode(std::uint32_t id, std::uint32_t begin, std::uint32_t end);
   // The batch evaluation, kLanes (2 or 4) queries at a time through the far-field and leaf terms.
   template <int kLanes>
   void Batch(std::span<const Eigen::Vector3d> queries, std::span<double> out) const;

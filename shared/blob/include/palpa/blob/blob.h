@@ -198,6 +198,17 @@ using BrickSource = std::function<std::optional<std::int32_t>(std::array<std::ui
 /// field (palpa build's) never coexists with the whole output. Non-RT.
 [[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, BrickSource bricks);
 
+/// Runs body(first, last) over ranges that together cover [0, count) once, possibly at once on
+/// several threads (a host's thread pool).
+using ParallelFor =
+    std::function<void(std::size_t count, const std::function<void(std::size_t first, std::size_t last)>& body)>;
+
+/// EncodeV2 from bricks, the planes of bricks (one bi each) and the free-space bounds' passes run
+/// through `parallel_for`: the same bytes. `bricks` is then called from several threads at once,
+/// for distinct bricks.
+[[nodiscard]] std::vector<std::byte> EncodeV2(const BlobMetaV2& meta, BrickSource bricks,
+                                              const ParallelFor& parallel_for);
+
 /// Every node of a verified view as Q16.16 voxels, C order (v2: what the sampler reads, padding
 /// excluded). Non-RT.
 [[nodiscard]] std::vector<std::int32_t> DenseQ16(const FieldView& view);
