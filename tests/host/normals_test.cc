@@ -445,23 +445,6 @@ TEST(FindWindingOutliers, AFlippedNormalIsAnOutlier) {
   EXPECT_LT(found.worst_jump, 0.0);
 }
 
-// The divergence theorem on analytic shapes: a closed sphere's outward normals sum to 0 over its
-// area, a hemisphere's to pi r^2 over 2 pi r^2, a disc seen from one side to its area.
-TEST(NormalFluxRatio, IsZeroForAClosedSurfaceAndTheProjectedShareForAnOpenOne) {
-  const Oriented sphere = Sphere(4000, 2.0);
-  EXPECT_LT(NormalFluxRatio(sphere.positions, sphere.normals), 0.01);
-  const Oriented hemisphere = Sphere(8000, 2.0, V3::Zero(), 0.0);
-  EXPECT_NEAR(NormalFluxRatio(hemisphere.positions, hemisphere.normals), 0.5, 0.03);
-  std::vector<V3> disc, up;
-  for (std::size_t i = 0; i < 2000; ++i) {
-    const V3 u = testing::FibonacciPoint(i, 2000);
-    disc.push_back(V3(u.x(), u.y(), 0));  // the sphere's lattice flattened: a disc, denser at its rim
-    up.push_back(V3::UnitZ());
-  }
-  EXPECT_NEAR(NormalFluxRatio(disc, up), 1.0, 1e-12);
-  EXPECT_EQ(NormalFluxRatio({V3::Zero()}, {V3::UnitZ()}), 0.0);
-}
-
 }  // namespace
 }  // namespace palpa::field
 

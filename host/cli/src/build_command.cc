@@ -227,13 +227,10 @@ int RunBuild(const BuildArgs& args) {
   // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
   const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
   const bool grown = built.grid_grown_from[0] > 0;
-  // Inside nodes cut at a grid face say the scan is open only when the samples do not enclose a
-  // volume themselves (NormalFluxRatio under 0.2, OrientNormals' closed pieces): CGAL's bull with
-  // 1,000 samples (0.024), whose sparse legs reached the faces, was called open.
-  const double flux = field::NormalFluxRatio(device.positions, device.normals);
-  const bool encloses = flux < 0.2;
-  const bool open_scan =
-      built.hermite.closed_area_m2 > 4.0 * voxel_area || (built.hermite.face_nodes_closed > 0 && !encloses) || grown;
+  // Inside nodes cut at a grid face say the scan is open only where no sample near them faces
+  // that face (HermiteStats::face_nodes_open): CGAL's bull with 1,000 samples, whose sparse legs
+  // reached its bottom face, was called open.
+  const bool open_scan = built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_open > 0 || grown;
   // Every method takes the inside from the normals' sign; say so when the file's normals disagree
   // (also with -q: the field is then wrong near those points). An open scan's far side is no
   // evidence (OrientationReport::OpenScanInconsistent).
@@ -271,10 +268,10 @@ int RunBuild(const BuildArgs& args) {
   }
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
-               "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; the samples "
-               "enclose a volume (their normals sum to {:.3f} of their area), so this is a part thinner or sparser "
-               "than the samples resolve, not an open side\n",
-               args.points, built.hermite.face_nodes_closed, flux);
+               "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; samples "
+               "beside them face the grid face, so this is a closed part thinner or sparser than the samples resolve, "
+               "not an open side\n",
+               args.points, built.hermite.face_nodes_closed);
   const field::GridSpec g = built.field.grid();  // a copy: the field is handed to the encoder below
   const std::size_t field_bricks = built.field.AllocatedBricks();
   const std::array<int, 3> brick_dims = built.field.brick_dims();

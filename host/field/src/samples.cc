@@ -463,16 +463,4 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   return out;
 }
 
-double NormalFluxRatio(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals) {
-  if (positions.size() < 2 || normals.size() != positions.size()) return 0.0;
-  const std::vector<double> areas = SampleAreas(positions);
-  Eigen::Vector3d flux = Eigen::Vector3d::Zero();
-  double total = 0.0;
-  for (std::size_t i = 0; i < positions.size(); ++i) {
-    flux += areas[i] * normals[i];
-    total += areas[i];
-  }
-  return total > 0.0 ? flux.norm() / total : 0.0;
-}
-
 }  // namespace palpa::field

@@ -70,6 +70,7 @@ struct HermiteStats {
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t winding_far_nodes = 0;      // evaluated nodes far from every sample given w's side
   std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
+  std::size_t face_nodes_open = 0;        // of which no sample near faces that grid face: an open side's
   // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
   // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
   // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.

@@ -142,12 +142,4 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
                                     double threshold, int passes = 2);
 
-/// |sum a_i n_i| / sum a_i over the samples, a_i their areas (SampleAreas): by the divergence
-/// theorem ~0 for samples that enclose a volume with outward (or all inward) normals, 0.5 for a
-/// hemisphere, 1 for a plane seen from one side. Issue 20: tells a closed sample set whose field
-/// reached the grid faces (a part thinner or sparser than the samples resolve) from an open scan.
-/// Measured: closed meshes and real scans 0.001-0.07, one-sided and 6-view range scans 0.23-0.45.
-/// 0 for fewer than 2 samples. Shapes: positions and unit normals of equal length.
-double NormalFluxRatio(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals);
-
 }  // namespace palpa::field
