@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
+#include "palpa/field/hermite_field.h"
 #include "point_cloud.h"
 
 namespace palpa::field {
@@ -23,21 +24,6 @@ struct Count {
   std::size_t uncovered = 0;
 };
 
-double MedianSpacing(const detail::KdTree& tree, const std::vector<V3>& samples) {
-  if (samples.size() < 2) return 0.0;
-  std::vector<double> nearest(samples.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 1024), [&](const auto& r) {
-    std::array<std::size_t, 2> idx{};
-    std::array<double, 2> d2{};
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(samples[i].data(), 2, idx.data(), d2.data());
-      nearest[i] = got == 2 ? std::sqrt(d2[1]) : 0.0;
-    }
-  });
-  std::nth_element(nearest.begin(), nearest.begin() + static_cast<std::ptrdiff_t>(nearest.size() / 2), nearest.end());
-  return nearest[nearest.size() / 2];
-}
-
 }  // namespace
 
 Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& samples) {
@@ -47,7 +33,7 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
   if (samples.empty() || !(h > 0.0)) return out;
   const detail::PointCloud cloud{&samples};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  out.min_distance_m = std::max(kCoverSpacings * MedianSpacing(tree, samples), h);
+  out.min_distance_m = std::max(kCoverSpacings * detail::Median(SampleSpacing(samples, 1)), h);
   const double min_d2 = out.min_distance_m * out.min_distance_m;
   constexpr int kB = SparseField::kBrick;
   const std::array<int, 3>& bd = field.brick_dims();

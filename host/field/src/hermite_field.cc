@@ -971,11 +971,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       if (normals[idx[m]].dot(out) > kCapCos) return true;
     return false;
   };
-  std::vector<double> sorted_spacing = spacing;
-  std::nth_element(sorted_spacing.begin(),
-                   sorted_spacing.begin() + static_cast<std::ptrdiff_t>(sorted_spacing.size() / 2),
-                   sorted_spacing.end());
-  const double trust = std::max(kTrustVoxels * h, kTrustSpacings * sorted_spacing[sorted_spacing.size() / 2]);
+  const double trust = std::max(kTrustVoxels * h, kTrustSpacings * detail::Median(spacing));
   // For the order-free searches below: any sample within trust, the nearest distance.
   const PointCloud cloud{&positions};
   const KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));

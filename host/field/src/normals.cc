@@ -107,12 +107,8 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       quadric[i] = QuadricResidual(positions, i, start[i], idx, got, std::sqrt(d2[got - 1]));
     }
   });
-  std::nth_element(offset.begin(), offset.begin() + static_cast<std::ptrdiff_t>(n / 2), offset.end());
-  const double sigma = offset[n / 2] / 0.674;
-  offset = {};
-  std::nth_element(quadric.begin(), quadric.begin() + static_cast<std::ptrdiff_t>(n / 2), quadric.end());
-  const double fit_noise = quadric[n / 2];
-  quadric = {};
+  const double sigma = detail::Median(std::move(offset)) / 0.674;
+  const double fit_noise = detail::Median(std::move(quadric));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::vector<std::size_t> idx(k + 1);
     std::vector<double> d2(k + 1), weight(k + 1);

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <numbers>
 #include <numeric>
@@ -137,9 +138,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
       farthest[i] = std::sqrt(d2[kPlaneNeighbours]);
     }
   });
-  std::vector<double> sorted = spacing;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n / 2), sorted.end());
-  const double s = sorted[n / 2];
+  const double s = detail::Median(spacing);
   out.spacing = s;
   if (!(s > 0.0)) return out;
   std::vector<double> excess(n, -1.0);  // offset in spacings when stray, else -1
@@ -414,14 +413,12 @@ NoiseSmoothing SmoothingPass(std::vector<Eigen::Vector3d>& positions, const std:
       std::tie(height[i], wide_residual[i]) = fit(got);
     }
   });
+  // Over the samples fitted (a residual of -1: too few agreeing normals); -1 when none was.
   const auto median = [](const std::vector<double>& values) {
     std::vector<double> fitted;
     fitted.reserve(values.size());
-    for (const double x : values)
-      if (x >= 0) fitted.push_back(x);
-    if (fitted.empty()) return -1.0;
-    std::nth_element(fitted.begin(), fitted.begin() + static_cast<std::ptrdiff_t>(fitted.size() / 2), fitted.end());
-    return fitted[fitted.size() / 2];
+    std::copy_if(values.begin(), values.end(), std::back_inserter(fitted), [](double x) { return x >= 0; });
+    return fitted.empty() ? -1.0 : detail::Median(std::move(fitted));
   };
   out.residual = median(residual);
   if (out.residual < 0) return out;
