@@ -17,7 +17,8 @@ voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so 
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
 band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|true| > 3: phantom
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
-use Python's `random` with fixed seeds: every run gives the same inputs. `--compare` runs a second
+use Python's `random` with fixed seeds: every run gives the same inputs (`--seed N` draws
+another set: palpa sample's seed and the perturbations'). `--compare` runs a second
 palpa binary on the same inputs (e.g. the tree before a change) and prints its figures beside.
 
 Beside palpa, every row gives screened Poisson (Open3D's create_from_point_cloud_poisson, depth 9,
@@ -73,19 +74,19 @@ def random_unit(rng):
             return unit(v)
 
 
-def perturbations(pts, voxel):
+def perturbations(pts, voxel, seed=1):
     """(name, points) for every row of the issue's table; `voxel` in model units."""
     lo = [min(p[a] for p in pts) for a in range(3)]
     hi = [max(p[a] for p in pts) for a in range(3)]
     out = [("clean", pts)]
-    rng = random.Random(1)
+    rng = random.Random(1 + 1000 * (seed - 1))
     for n in (1000, 500):
         out.append((f"{n} samples", rng.sample(pts, n)))
     for sigma in (0.5, 1.0):
-        rng = random.Random(2)
+        rng = random.Random(2 + 1000 * (seed - 1))
         out.append((f"position noise {sigma} voxel",
                     [[p[a] + rng.gauss(0, sigma * voxel) for a in range(3)] + p[3:] for p in pts]))
-    rng = random.Random(3)
+    rng = random.Random(3 + 1000 * (seed - 1))
     noisy = []
     for p in pts:
         n = p[3:]
@@ -95,7 +96,7 @@ def perturbations(pts, voxel):
         m = [n[a] * math.cos(t) + cross(axis, n)[a] * math.sin(t) for a in range(3)]
         noisy.append(p[:3] + m)
     out.append(("normal noise 15 deg", noisy))
-    rng = random.Random(4)
+    rng = random.Random(4 + 1000 * (seed - 1))
     extra = [[rng.uniform(lo[a], hi[a]) for a in range(3)] + random_unit(rng) for _ in range(len(pts) // 50)]
     out.append(("2 % outliers", pts + extra))
     p = pts[17]
@@ -231,6 +232,8 @@ def main():
     ap.add_argument("--rows", help="only the inputs whose label starts with one of these, comma-separated "
                     "(e.g. clean,2 %%)")
     ap.add_argument("--depth", type=int, default=9, help="screened Poisson octree depth")
+    ap.add_argument("--seed", type=int, default=1,
+                    help="another draw of every input (palpa sample's seed and the perturbations'); 1: the table's")
     ap.add_argument("--no-poisson", action="store_true", help="skip the screened Poisson column")
     args = ap.parse_args()
     o3d = None if args.no_poisson else need_open3d()
@@ -246,18 +249,18 @@ def main():
         mesh = name if name.endswith(".off") else f"data/{name}.off"
         name = os.path.splitext(os.path.basename(mesh))[0]
         base = os.path.join(args.work, f"{name}-5000.xyz")
-        run(args.palpa, "sample", mesh, "-n", "5000", "--seed", "1", "-o", base, "-q")
+        run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", base, "-q")
         pts = read_xyz(base)
         # The voxel in model units: the fit maps the longest side to --fit metres over `cells` nodes.
         probe = os.path.join(args.work, "probe.palpa")
         run(args.palpa, "build", base, "-o", probe, "--cells", str(args.cells), "-q")
         info = json.loads(run(args.palpa, "info", "--json", probe).stdout)
         voxel = info["voxel"] / info["fit_scale"]
-        rows = perturbations(pts, voxel)
+        rows = perturbations(pts, voxel, args.seed)
         # Virtual range scans (palpa sample --views): open, occluded, with and without range noise.
         for noise in (0.0, 0.5) if not args.rows or "range" in args.rows else ():
             scan = os.path.join(args.work, f"{name}-scan-{noise}.xyz")
-            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", "1", "--views", "6", "--range-noise",
+            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "--views", "6", "--range-noise",
                 repr(noise * voxel), "-o", scan, "-q")
             rows.append((f"range scan, 6 views" + (f", range noise {noise} voxel" if noise else ""), read_xyz(scan)))
         for label, p in rows:
