@@ -570,6 +570,25 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
     return;
   }
   Pack(s, l8, block8);
+  // A block of size^3 nodes from (a0, b0, c0): its lists culled from its parent's, then filled
+  // with +-band where they certify it or its centre test finds it far. False: evaluate inside.
+  const auto settled = [&](const Block& parent_block, const Lists& parent, int a0, int b0, int c0, int size, float rho,
+                           Lists& lists, Block& packed) {
+    const double half = 0.5 * (size - 1);
+    const float cx = at(0, a0 + half), cy = at(1, b0 + half), cz = at(2, c0 + half);
+    Cull(InOrder(parent_block), parent, cx, cy, cz, rho, band, lists);
+    if (lists.certified != 0) {
+      fill(a0, b0, c0, size, static_cast<float>(lists.certified) * band);
+      return true;
+    }
+    Pack(s, lists, packed);
+    const float far = SurelyNear(model, lists, rho, band)
+                          ? 0.0f
+                          : FarValue(EvaluateBlock(model, packed, cx, cy, cz, 4.0f * band), rho, band);
+    if (far == 0.0f) return false;
+    fill(a0, b0, c0, size, far);
+    return true;
+  };
   for (int a4 = 0; a4 < kB; a4 += 4)
     for (int b4 = 0; b4 < kB; b4 += 4)
       for (int c4 = 0; c4 < kB; c4 += 4) {
@@ -577,40 +596,12 @@ void EvaluateBrick(const Model& model, const Scratch& s, const std::array<double
           fill(a4, b4, c4, 4, band);  // no grid nodes here (last brick of an axis)
           continue;
         }
-        Cull(InOrder(block8), l8, at(0, a4 + 1.5), at(1, b4 + 1.5), at(2, c4 + 1.5), rho4, band, l4);
-        if (l4.certified != 0) {
-          fill(a4, b4, c4, 4, static_cast<float>(l4.certified) * band);
-          continue;
-        }
-        Pack(s, l4, block4);
-        if (const float far = SurelyNear(model, l4, rho4, band)
-                                  ? 0.0f
-                                  : FarValue(EvaluateBlock(model, block4, at(0, a4 + 1.5), at(1, b4 + 1.5),
-                                                           at(2, c4 + 1.5), 4.0f * band),
-                                             rho4, band);
-            far != 0.0f) {
-          fill(a4, b4, c4, 4, far);
-          continue;
-        }
+        if (settled(block8, l8, a4, b4, c4, 4, rho4, l4, block4)) continue;
         // The eight 2^3 blocks: lists culled again, the centre test, then the 8 nodes in one pass.
         for (int a2 = a4; a2 < a4 + 4; a2 += 2)
           for (int b2 = b4; b2 < b4 + 4; b2 += 2)
             for (int c2 = c4; c2 < c4 + 4; c2 += 2) {
-              Cull(InOrder(block4), l4, at(0, a2 + 0.5), at(1, b2 + 0.5), at(2, c2 + 0.5), rho2, band, l2);
-              if (l2.certified != 0) {
-                fill(a2, b2, c2, 2, static_cast<float>(l2.certified) * band);
-                continue;
-              }
-              Pack(s, l2, block);
-              if (const float far = SurelyNear(model, l2, rho2, band)
-                                        ? 0.0f
-                                        : FarValue(EvaluateBlock(model, block, at(0, a2 + 0.5), at(1, b2 + 0.5),
-                                                                 at(2, c2 + 0.5), 4.0f * band),
-                                                   rho2, band);
-                  far != 0.0f) {
-                fill(a2, b2, c2, 2, far);
-                continue;
-              }
+              if (settled(block4, l4, a2, b2, c2, 2, rho2, l2, block)) continue;
               std::array<float, 8> xs, ys, zs, out;
               for (std::size_t k = 0; k < 8; ++k) {
                 xs[k] = at(0, a2 + static_cast<int>(k >> 2));
