@@ -8,7 +8,6 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <Eigen/QR>
 
 #include <fmt/format.h>
 #include <tbb/blocked_range.h>
@@ -33,28 +32,6 @@ constexpr double kSelectNoise = 2.0;
 // Triples of P_i and two of its kTripleNeighbours nearest: a face met by only a thin row of
 // samples near P_i still has a non-collinear pair among them (9 -> 13: fandisk 0.52 -> 0.49 %).
 constexpr std::size_t kTripleNeighbours = 12;
-
-// RMS offset of P_i's k nearest from the quadric height function fitted to them over the tangent
-// plane of `normal` (least squares, 6 coefficients): the samples' noise where the surface is
-// smooth, free of its curvature, which a plane's offsets count as noise.
-double QuadricResidual(const std::vector<V3>& positions, std::size_t i, const V3& normal,
-                       const std::vector<std::size_t>& idx, std::size_t got, double scale) {
-  if (got < 8) return 0;
-  const V3 u = normal.unitOrthogonal();
-  const V3 v = normal.cross(u);
-  Eigen::MatrixXd a(static_cast<Eigen::Index>(got), 6);
-  Eigen::VectorXd h(static_cast<Eigen::Index>(got));
-  for (std::size_t m = 0; m < got; ++m) {
-    const V3 d = (positions[idx[m]] - positions[i]) / scale;  // unit scale: a well-conditioned fit
-    const double x = d.dot(u);
-    const double y = d.dot(v);
-    const auto row = static_cast<Eigen::Index>(m);
-    a.row(row) << 1, x, y, x * x, x * y, y * y;
-    h[row] = d.dot(normal);
-  }
-  const Eigen::VectorXd c = a.colPivHouseholderQr().solve(h);
-  return scale * std::sqrt((a * c - h).squaredNorm() / static_cast<double>(got - 6));
-}
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -104,7 +81,10 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       std::nth_element(residual.begin(), residual.begin() + static_cast<std::ptrdiff_t>(got / 2),
                        residual.begin() + static_cast<std::ptrdiff_t>(got));
       offset[i] = residual[got / 2];
-      quadric[i] = QuadricResidual(positions, i, start[i], idx, got, std::sqrt(d2[got - 1]));
+      // Every neighbour: the residual of a surface's own curvature is ~0, of noise the noise.
+      const detail::QuadricFit fit = detail::FitQuadric(positions, idx.data(), got, positions[i], start[i],
+                                                        std::sqrt(d2[got - 1]), 8, [](std::size_t) { return true; });
+      quadric[i] = std::max(fit.rms, 0.0);
     }
   });
   const double sigma = detail::Median(std::move(offset)) / 0.674;

@@ -4,8 +4,10 @@
 // (nanoflann computes it).
 #pragma once
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <vector>
 
@@ -42,6 +44,52 @@ inline double Median(std::vector<double> values) {
   const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
   std::nth_element(values.begin(), mid, values.end());
   return *mid;
+}
+
+// A least-squares quadric height over the tangent plane of `normal` at `p`: h(u, v) = c0 + c1 u +
+// c2 v + c3 u^2 + c4 uv + c5 v^2 through the samples idx[0..count) that `use(j)` accepts, u, v and
+// h in units of `scale` (a well-conditioned fit). `height` is c0 and `rms` the RMS residual over
+// (used - 6) degrees of freedom, both in model units; rms < 0 when fewer than `min_used` samples
+// were accepted or the fit is not finite. The normal estimate's noise figure and the denoising
+// pass both use it (normals.cc, samples.cc).
+struct QuadricFit {
+  double height = 0.0;
+  double rms = -1.0;
+};
+template <class Use>
+QuadricFit FitQuadric(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx, std::size_t count,
+                      const Eigen::Vector3d& p, const Eigen::Vector3d& normal, double scale, int min_used, Use use) {
+  using M6 = Eigen::Matrix<double, 6, 6>;
+  using V6 = Eigen::Matrix<double, 6, 1>;
+  const Eigen::Vector3d axis = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = axis.cross(normal).normalized();
+  const Eigen::Vector3d t2 = normal.cross(t1);
+  M6 m = M6::Zero();
+  V6 rhs = V6::Zero();
+  int used = 0;
+  for (std::size_t a = 0; a < count; ++a) {
+    if (!use(idx[a])) continue;
+    const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
+    const double u = d.dot(t1), v = d.dot(t2);
+    V6 row;
+    row << 1, u, v, u * u, u * v, v * v;
+    m += row * row.transpose();
+    rhs += row * d.dot(normal);
+    ++used;
+  }
+  if (used < min_used) return {};
+  m.diagonal().array() += 1e-9;
+  const V6 c = m.ldlt().solve(rhs);
+  if (!c.allFinite()) return {};
+  double sum2 = 0.0;
+  for (std::size_t a = 0; a < count; ++a) {
+    if (!use(idx[a])) continue;
+    const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
+    const double u = d.dot(t1), v = d.dot(t2);
+    const double e = d.dot(normal) - (c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v);
+    sum2 += e * e;
+  }
+  return {c[0] * scale, std::sqrt(sum2 / std::max(used - 6, 1)) * scale};
 }
 
 }  // namespace palpa::field::detail

@@ -8,7 +8,6 @@
 #include <limits>
 #include <numbers>
 #include <numeric>
-#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -367,50 +366,22 @@ NoiseSmoothing SmoothingPass(std::vector<Eigen::Vector3d>& positions, const std:
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
     std::vector<std::size_t> idx(neighbours + 1);
     std::vector<double> d2(neighbours + 1);
-    using M6 = Eigen::Matrix<double, 6, 6>;
-    using V6 = Eigen::Matrix<double, 6, 1>;
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const Eigen::Vector3d& p = positions[i];
       const Eigen::Vector3d& nrm = normals[i];
       const std::size_t got = tree.knnSearch(p.data(), neighbours + 1, idx.data(), d2.data());
       const double scale = std::sqrt(d2[got - 1]);  // u, v, z in units of the neighbourhood
       if (!(scale > 0)) continue;
-      const Eigen::Vector3d axis = std::abs(nrm.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-      const Eigen::Vector3d t1 = axis.cross(nrm).normalized();
-      const Eigen::Vector3d t2 = nrm.cross(t1);
-      // Fit over the first `count` neighbours (nearest first): {height at P, RMS residual}, or
-      // {0, -1} with too few agreeing normals.
-      const auto fit = [&](std::size_t count) -> std::pair<double, double> {
-        M6 m = M6::Zero();
-        V6 rhs = V6::Zero();
-        int used = 0;
-        for (std::size_t a = 0; a < count; ++a) {  // the sample itself included
-          if (normals[idx[a]].dot(nrm) < kAgreeCos) continue;
-          const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
-          const double u = d.dot(t1), v = d.dot(t2);
-          V6 row;
-          row << 1, u, v, u * u, u * v, v * v;
-          m += row * row.transpose();
-          rhs += row * d.dot(nrm);
-          ++used;
-        }
-        if (used < kMinFit + 1) return {0.0, -1.0};
-        m.diagonal().array() += 1e-9;
-        const V6 c = m.ldlt().solve(rhs);
-        if (!c.allFinite()) return {0.0, -1.0};
-        double sum2 = 0.0;
-        for (std::size_t a = 0; a < count; ++a) {
-          if (normals[idx[a]].dot(nrm) < kAgreeCos) continue;
-          const Eigen::Vector3d d = (positions[idx[a]] - p) / scale;
-          const double u = d.dot(t1), v = d.dot(t2);
-          const double e = d.dot(nrm) - (c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v);
-          sum2 += e * e;
-        }
-        // Least squares leaves (used - 6) / used of the noise's variance in the residuals.
-        return {c[0] * scale, std::sqrt(sum2 / std::max(used - 6, 1)) * scale};
+      // Over the first `count` neighbours (nearest first, the sample itself included), those
+      // whose normals agree.
+      const auto fit = [&](std::size_t count) {
+        return detail::FitQuadric(positions, idx.data(), count, p, nrm, scale, kMinFit + 1,
+                                  [&](std::size_t j) { return normals[j].dot(nrm) >= kAgreeCos; });
       };
-      residual[i] = fit(std::min(got, kNoiseNeighbours + 1)).second;
-      std::tie(height[i], wide_residual[i]) = fit(got);
+      residual[i] = fit(std::min(got, kNoiseNeighbours + 1)).rms;
+      const detail::QuadricFit wide_fit = fit(got);
+      height[i] = wide_fit.rms < 0 ? 0.0 : wide_fit.height;
+      wide_residual[i] = wide_fit.rms;
     }
   });
   // Over the samples fitted (a residual of -1: too few agreeing normals); -1 when none was.
