@@ -75,20 +75,18 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     HermiteStats& stats = result.hermite;
     HermiteOptions hermite_options;
     hermite_options.leak_guard = options.leak_guard;
+    const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);
+    const bool grow = options.grow_for_closure && !result.orientation.OpenScanInconsistent();
+    hermite_options.closure_reach_m = grow ? reach.x() : 0.0;
     result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
     // An open scan closed at the grid faces: grow the grid, voxel kept, to hold the closure
     // (issue 20: no inside node on a grid face, and no flat cut where the closure goes on). Not
     // when the normals disagree: the closure then follows flipped samples (data/cube.pwn: a
     // grid 4.2 times larger, 26 s instead of 9, and still cut at its faces). A second closure may
     // reach farther than the first lattice saw: up to kClosureGrowths rounds.
-    const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);
     Eigen::AlignedBox3d hold(lo, hi);  // what the grid must hold: the samples and their closure
-    for (int round = 0; round < kClosureGrowths && options.grow_for_closure && stats.face_nodes_closed > 0 &&
-                        !result.orientation.OpenScanInconsistent();
-         ++round) {
-      const auto closure = ClosureBeyondGrid(*grid, device_positions, unit_normals, stats.inner, reach.x());
-      if (!closure) break;
-      hold.extend(*closure);
+    for (int round = 0; round < kClosureGrowths && stats.closure_beyond_grid; ++round) {
+      hold.extend(*stats.closure_beyond_grid);
       hold = hold.intersection(Eigen::AlignedBox3d(lo - reach, hi + reach));
       GridOptions grown = options.grid;
       grown.voxel_m = grid->voxel_m;
@@ -98,6 +96,7 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
       if (round == 0) result.grid_grown_from = grid->dims;
       grid = std::move(bigger);
       stats = {};
+      if (round + 1 == kClosureGrowths) hermite_options.closure_reach_m = 0.0;  // no round left to use it
       result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
       stats.seconds_distance += seconds;  // the earlier passes count as distance time
     }

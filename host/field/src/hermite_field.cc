@@ -776,6 +776,52 @@ class ClosingRule {
   const std::vector<V3>& normals_;
 };
 
+// HermiteStats::closure_beyond_grid: the lattice of half a brick past `grid`, within `reach_m` of
+// its box and inside the union of the inner balls (nothing the rule puts inside lies beyond).
+std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const Packing& inner, double reach_m,
+                                                     const WindingNumber& winding, const ClosingRule& rule) {
+  const std::size_t n = inner.centres.size();
+  if (n < 2 || !(grid.voxel_m > 0.0) || !(reach_m > 0.0)) return std::nullopt;
+  const double step = 0.5 * SparseField::kBrick * grid.voxel_m;
+  const Eigen::AlignedBox3d grid_box(grid.origin_m, grid.Node(grid.dims[0] - 1, grid.dims[1] - 1, grid.dims[2] - 1));
+  Eigen::AlignedBox3d balls;
+  for (std::size_t i = 0; i < n; ++i) {
+    balls.extend(V3(inner.centres[i] - V3::Constant(inner.radii[i])));
+    balls.extend(V3(inner.centres[i] + V3::Constant(inner.radii[i])));
+  }
+  const Eigen::AlignedBox3d search = balls.intersection(
+      Eigen::AlignedBox3d(grid_box.min() - V3::Constant(reach_m), grid_box.max() + V3::Constant(reach_m)));
+  if (grid_box.contains(search)) return std::nullopt;
+  const V3 lo = search.min(), hi = search.max();
+  std::array<int, 3> count{};
+  for (Eigen::Index a = 0; a < 3; ++a)
+    count[static_cast<std::size_t>(a)] = std::max(1, static_cast<int>(std::ceil((hi[a] - lo[a]) / step)) + 1);
+  tbb::enumerable_thread_specific<Eigen::AlignedBox3d> boxes;
+  tbb::parallel_for(tbb::blocked_range<int>(0, count[0]), [&](const auto& r) {
+    Eigen::AlignedBox3d& box = boxes.local();
+    std::vector<V3> p;  // a plane's lattice points outside the grid, w for them in one batch
+    std::vector<double> w;
+    for (int i = r.begin(); i != r.end(); ++i) {
+      p.clear();
+      for (int j = 0; j < count[1]; ++j)
+        for (int k = 0; k < count[2]; ++k) {
+          const V3 q = lo + step * V3(i, j, k);
+          if (!grid_box.contains(q)) p.push_back(q);
+        }
+      w.resize(p.size());
+      winding(p, w);
+      for (std::size_t m = 0; m < p.size(); ++m)
+        if (rule.Inside(w[m], p[m])) box.extend(p[m]);
+    }
+  });
+  Eigen::AlignedBox3d box;
+  for (const Eigen::AlignedBox3d& b : boxes)
+    if (!b.isEmpty()) box.extend(b);
+  if (box.isEmpty()) return std::nullopt;
+  // The lattice may miss up to a step of the inside past its last node.
+  return Eigen::AlignedBox3d(box.min() - V3::Constant(step), box.max() + V3::Constant(step));
+}
+
 // Inside/outside of every brick the evaluation left unallocated, from the winding number of the
 // samples (issue 20; replaces the majority vote of LabelUnallocatedBricks, which a hole, an open
 // scan or an outlier turns into phantom solid far from the surface). Inside is w >= 1/2, or w
@@ -790,7 +836,7 @@ class ClosingRule {
 // is smooth, never a staircase of brick faces.
 // `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
-                    const KdTree& tree, const std::vector<double>& spacing, HermiteStats& st) {
+                    const KdTree& tree, const std::vector<double>& spacing, double closure_reach_m, HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -1084,61 +1130,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     open_cut += local;
   });
   st.face_nodes_open = far_faces.load() + open_cut.load();
+  if (closure_reach_m > 0.0 && st.face_nodes_closed > 0)
+    st.closure_beyond_grid = ClosureBeyondGrid(grid, st.inner, closure_reach_m, winding, rule);
 }
 
 }  // namespace
-
-std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const std::vector<V3>& positions,
-                                                     const std::vector<V3>& normals, const Packing& inner,
-                                                     double reach_m) {
-  const std::size_t n = positions.size();
-  if (n < 2 || normals.size() != n || inner.centres.size() != n || !(grid.voxel_m > 0.0) || !(reach_m > 0.0))
-    return std::nullopt;
-  const double step = 0.5 * SparseField::kBrick * grid.voxel_m;
-  const Eigen::AlignedBox3d grid_box(grid.origin_m, grid.Node(grid.dims[0] - 1, grid.dims[1] - 1, grid.dims[2] - 1));
-  // Nothing the rule puts inside lies outside the union of the inner balls.
-  Eigen::AlignedBox3d balls;
-  for (std::size_t i = 0; i < n; ++i) {
-    balls.extend(V3(inner.centres[i] - V3::Constant(inner.radii[i])));
-    balls.extend(V3(inner.centres[i] + V3::Constant(inner.radii[i])));
-  }
-  const Eigen::AlignedBox3d search = balls.intersection(
-      Eigen::AlignedBox3d(grid_box.min() - V3::Constant(reach_m), grid_box.max() + V3::Constant(reach_m)));
-  if (grid_box.contains(search)) return std::nullopt;
-  const V3 lo = search.min(), hi = search.max();
-  std::array<int, 3> count{};
-  for (Eigen::Index a = 0; a < 3; ++a)
-    count[static_cast<std::size_t>(a)] = std::max(1, static_cast<int>(std::ceil((hi[a] - lo[a]) / step)) + 1);
-  const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  const WindingNumber winding(positions, normals, SampleAreas(positions, kAreaNeighbours));
-  const std::vector<std::uint8_t> rim = RimSamples(tree, positions, normals, winding);
-  const ClosingRule rule(tree, inner, rim, positions, normals);
-  tbb::enumerable_thread_specific<Eigen::AlignedBox3d> boxes;
-  tbb::parallel_for(tbb::blocked_range<int>(0, count[0]), [&](const auto& r) {
-    Eigen::AlignedBox3d& box = boxes.local();
-    std::vector<V3> p;  // a plane's lattice points outside the grid, w for them in one batch
-    std::vector<double> w;
-    for (int i = r.begin(); i != r.end(); ++i) {
-      p.clear();
-      for (int j = 0; j < count[1]; ++j)
-        for (int k = 0; k < count[2]; ++k) {
-          const V3 q = lo + step * V3(i, j, k);
-          if (!grid_box.contains(q)) p.push_back(q);
-        }
-      w.resize(p.size());
-      winding(p, w);
-      for (std::size_t m = 0; m < p.size(); ++m)
-        if (rule.Inside(w[m], p[m])) box.extend(p[m]);
-    }
-  });
-  Eigen::AlignedBox3d box;
-  for (const Eigen::AlignedBox3d& b : boxes)
-    if (!b.isEmpty()) box.extend(b);
-  if (box.isEmpty()) return std::nullopt;
-  // The lattice may miss up to a step of the inside past its last node.
-  return Eigen::AlignedBox3d(box.min() - V3::Constant(step), box.max() + V3::Constant(step));
-}
 
 SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions, const std::vector<V3>& normals,
                          double r_max, const HermiteOptions& options, HermiteStats* stats) {
@@ -1371,7 +1367,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   st.seconds_evaluate = SecondsSince(phase);
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
-    LabelByWinding(field, positions, normals, tree, spacing, st);
+    LabelByWinding(field, positions, normals, tree, spacing, options.closure_reach_m, st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }

@@ -37,7 +37,7 @@ struct BuildOptions {
   bool leak_guard = true;
   // kHermite: when the field of an open scan is closed at the grid's faces, grow the grid (same
   // voxel, up to half the samples' longest side per side) to hold the closure, and build again
-  // (ClosureBeyondGrid). false keeps the grid fitted to the samples.
+  // (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.
   bool grow_for_closure = true;
 };
 

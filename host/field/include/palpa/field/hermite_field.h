@@ -30,7 +30,7 @@
 // evaluated nodes clamped to the band edge take w's side where all 8 corners are sure of it
 // (< 0.3 or > 0.7), and no node on a grid face stays inside. Where w is unclear (0.3 <= w < 1/2,
 // or down to 0.1 behind a rim sample: an open scan's missing side) the inner balls of the nearest
-// samples decide, so the closure continues the scanned curvature (ClosureBeyondGrid). Last
+// samples decide, so the closure continues the scanned curvature (closure_beyond_grid). Last
 // SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the proxy's
 // sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
 // patches meet or the bracket clamps.
@@ -58,6 +58,10 @@ struct HermiteOptions {
   // winding.h). false: the former majority vote (SparseField::LabelUnallocatedBricks), kept to
   // measure the difference.
   bool winding_labels = true;
+  // > 0 (metres): where the inside reached a grid face, LabelByWinding also finds how far past the
+  // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
+  // with the winding number and closing rule it already holds. 0: not searched.
+  double closure_reach_m = 0.0;
 };
 
 struct HermiteStats {
@@ -75,6 +79,13 @@ struct HermiteStats {
   // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
   // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.
   double closed_area_m2 = 0.0;
+  // An open scan's closure beyond the grid (issue 20; HermiteOptions::closure_reach_m). Where w is
+  // unclear (0.3 <= w < 1/2) the inner balls of the 16 samples nearest decide, so the closure
+  // follows the scanned part's curvature and may reach past the grid fitted to the samples, where
+  // the grid faces would cut it flat. The box (metres) holds every node of a lattice of half a
+  // brick (4 voxels) outside the grid that the rule puts inside, widened by one lattice step;
+  // empty (std::nullopt) when there is none or it was not searched.
+  std::optional<Eigen::AlignedBox3d> closure_beyond_grid;
   SparseField::LipschitzStats lipschitz;
   Packing inner;                  // guarded, metres
   Packing outer;                  // guarded, metres (balls outside the object)
@@ -98,19 +109,6 @@ std::vector<double> SampleSpacing(const std::vector<Eigen::Vector3d>& positions,
 std::size_t GuardPacking(Packing& packing, const std::vector<Eigen::Vector3d>& positions,
                          const std::vector<Eigen::Vector3d>& ball_normals, const std::vector<double>& spacing,
                          double disc_spacings, double tolerance);
-
-// An open scan's closure beyond `grid` (issue 20). LabelByWinding closes an unscanned side by the
-// samples' winding number w (inside where w >= 1/2) and, where w is unclear (0.3 <= w < 1/2), by
-// the guarded inner balls `inner` (HermiteStats::inner) of the 16 samples nearest: the closure
-// follows the scanned part's curvature and may reach past the grid fitted to the samples, where
-// the grid faces would cut it flat. Returns the box (metres) holding every node of a lattice of
-// half a brick (4 voxels) that the rule puts inside outside `grid`, within `reach_m` of the
-// grid's box, widened by one lattice step; std::nullopt when there is none. positions and unit
-// normals in metres, same size as inner's balls. Deterministic, parallel.
-std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid,
-                                                     const std::vector<Eigen::Vector3d>& positions,
-                                                     const std::vector<Eigen::Vector3d>& normals, const Packing& inner,
-                                                     double reach_m);
 
 // The default method's field on `grid` from unit-normal oriented points in grid units (metres).
 // r_max caps the packed balls as in PackSpheres. Values in voxels, clamped to +-band, axis
