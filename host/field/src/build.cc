@@ -4,6 +4,7 @@
 #include <cmath>
 #include <exception>
 #include <new>
+#include <utility>
 
 #include <fmt/format.h>
 #include <Eigen/Geometry>
@@ -95,9 +96,11 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
       const double seconds = stats.seconds_packing + stats.seconds_distance;
       if (round == 0) result.grid_grown_from = grid->dims;
       grid = std::move(bigger);
-      stats = {};
+      const HermiteStats previous = std::exchange(stats, {});
+      hermite_options.packed = &previous;  // same voxel: the packing does not change
       if (round + 1 == kClosureGrowths) hermite_options.closure_reach_m = 0.0;  // no round left to use it
       result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
+      hermite_options.packed = nullptr;
       stats.seconds_distance += seconds;  // the earlier passes count as distance time
     }
     result.packing = std::move(stats.inner);

@@ -1150,9 +1150,16 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   const std::vector<double> spacing = SampleSpacing(positions);
   std::vector<V3> flipped(n);
   for (std::size_t i = 0; i < n; ++i) flipped[i] = -normals[i];
-  tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
-                       [&] { st.outer = PackSpheres(positions, flipped, r_max); });
-  if (options.leak_guard) {
+  if (options.packed != nullptr) {
+    st.inner = options.packed->inner;
+    st.outer = options.packed->outer;
+    st.inner_balls_shrunk = options.packed->inner_balls_shrunk;
+    st.outer_balls_shrunk = options.packed->outer_balls_shrunk;
+  } else {
+    tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
+                         [&] { st.outer = PackSpheres(positions, flipped, r_max); });
+  }
+  if (options.leak_guard && options.packed == nullptr) {
     tbb::parallel_invoke(
         [&] {
           st.inner_balls_shrunk =

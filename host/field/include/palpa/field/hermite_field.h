@@ -51,6 +51,8 @@
 
 namespace palpa::field {
 
+struct HermiteStats;
+
 struct HermiteOptions {
   // Step 3 above. Off only to measure what it prevents (tests, docs/field-methods.md).
   bool leak_guard = true;
@@ -62,6 +64,10 @@ struct HermiteOptions {
   // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
   // with the winding number and closing rule it already holds. 0: not searched.
   double closure_reach_m = 0.0;
+  // The guarded packings (inner, outer and their shrink counts) of an earlier HermiteField on the
+  // same samples, normals, r_max, leak_guard and voxel, to use instead of packing again: they do not
+  // depend on the grid's extent (a grid grown to hold an open scan's closure). nullptr: pack.
+  const HermiteStats* packed = nullptr;
 };
 
 struct HermiteStats {
