@@ -244,6 +244,7 @@ TEST_F(Cli, NoisyScansAreDenoisedAndSaySo) {
   ASSERT_EQ(on.code, 0) << on.out;
   EXPECT_NE(on.out.find("position noise "), std::string::npos) << on.out;
   EXPECT_NE(on.out.find("(--denoise off keeps them)"), std::string::npos) << on.out;
+  EXPECT_NE(on.out.find("the field filtered once over 3x3x3 nodes"), std::string::npos) << on.out;
   const Outcome off = Palpa("build " + input + " -o " + Path("off.palpa") + " --cells 64 --denoise off");
   ASSERT_EQ(off.code, 0) << off.out;
   EXPECT_EQ(off.out.find("position noise "), std::string::npos) << off.out;

@@ -243,5 +243,76 @@ TEST(LabelUnallocatedBricks, HollowBallCavityIsOutside) {
   EXPECT_EQ(wrong, 0u);
 }
 
+// SmoothBand's [1 2 1] / 4 per axis: exact on a linear field, and node noise of RMS e left at
+// e * (6/16)^(3/2) = 0.23 e (the kernel's sum of squared weights).
+TEST(SmoothBand, KeepsALinearFieldAndAveragesNodeNoise) {
+  const GridSpec g = Grid(24, 24, 24, 6);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> noise(-0.2f, 0.2f);
+  std::vector<float> e(24 * 24 * 24);
+  for (float& x : e) x = noise(rng);
+  const auto plane = [](int i, int j, int k) {
+    return static_cast<float>(0.3 * (i - 12) + 0.2 * (j - 12) + 0.5 * (k - 12.3));
+  };
+  const auto at = [](int i, int j, int k) { return static_cast<std::size_t>((i * 24 + j) * 24 + k); };
+  SparseField linear = AllAllocated(g, plane);
+  SparseField noisy = AllAllocated(g, [&](int i, int j, int k) { return plane(i, j, k) + e[at(i, j, k)]; });
+  linear.SmoothBand();
+  noisy.SmoothBand();
+  double before = 0.0, after = 0.0;
+  int count = 0;
+  for (int i = 1; i < 23; ++i)
+    for (int j = 1; j < 23; ++j)
+      for (int k = 1; k < 23; ++k) {
+        const float p = plane(i, j, k);
+        if (std::abs(p) > 5.0f) continue;  // the filter reads no clamped node
+        EXPECT_NEAR(linear.Value(i, j, k), p, 1e-5f) << i << " " << j << " " << k;
+        const double x = e[at(i, j, k)], y = noisy.Value(i, j, k) - p;
+        before += x * x;
+        after += y * y;
+        ++count;
+      }
+  ASSERT_GT(count, 1000);
+  const double ratio = std::sqrt(after / before);
+  EXPECT_GT(ratio, 0.18);
+  EXPECT_LT(ratio, 0.28);
+}
+
+// The heat equation for t = 1/4 voxel^2: a sphere's signed distance r - R rises by
+// t * laplacian = (1/4)(2/r) = 0.5/r voxels, so its surface moves inward by 0.05 voxel at R = 10.
+// Bricks away from the surface stay uniform; values stay within the band and Lipschitz.
+TEST(SmoothBand, MovesASphereInwardByItsMeanCurvature) {
+  const GridSpec g = Grid(40, 40, 40, 4);
+  const auto r = [](int i, int j, int k) { return std::hypot(i - 19.7, j - 20.2, k - 20.1); };
+  std::vector<float> dense(40 * 40 * 40);
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j)
+      for (int k = 0; k < 40; ++k)
+        dense[static_cast<std::size_t>((i * 40 + j) * 40 + k)] =
+            static_cast<float>(std::clamp(r(i, j, k) - 10.0, -4.0, 4.0));
+  SparseField f = SparseField::FromDense(g, dense);
+  f.ProjectLipschitz();
+  const std::size_t bricks = f.AllocatedBricks();
+  SparseField before = f;
+  f.SmoothBand();
+  EXPECT_EQ(f.AllocatedBricks(), bricks);
+  EXPECT_LE(MaxNeighbourDifference(f), kStep + 1e-5f);
+  double rise = 0.0, expected = 0.0;
+  int count = 0;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j)
+      for (int k = 0; k < 40; ++k) {
+        const float v = f.Value(i, j, k);
+        ASSERT_LE(std::abs(v), 4.0f);
+        const double d = r(i, j, k) - 10.0;
+        if (std::abs(d) > 1.0) continue;
+        rise += v - before.Value(i, j, k);
+        expected += 0.5 / r(i, j, k);
+        ++count;
+      }
+  ASSERT_GT(count, 500);
+  EXPECT_NEAR(rise / count, expected / count, 0.15 * expected / count);
+}
+
 }  // namespace
 }  // namespace palpa::field

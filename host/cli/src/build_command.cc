@@ -215,11 +215,14 @@ int RunBuild(const BuildArgs& args) {
       const double h = grid->voxel_m;
       const field::NoiseSmoothing smoothed =
           field::SmoothNoisyPositions(device.positions, device.normals, kDenoiseNeighbours, kDenoiseVoxels * h);
+      // What the fits leave is noise at the sample spacing: one binomial filter of the field
+      // averages it (bull, sigma = 1 voxel: band mean 0.368 -> 0.347, wrong sign 6.16 -> 5.31 %).
+      options.smooth_band = smoothed.Applied();
       if (smoothed.Applied() && !args.quiet)
         fmt::print(stderr,
                    "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved onto the "
-                   "quadric of their {} nearest samples with agreeing normals (twice), {:.2f} voxels on average "
-                   "(--denoise off keeps them)\n",
+                   "quadric of their {} nearest samples with agreeing normals (twice), {:.2f} voxels on average, "
+                   "and the field filtered once over 3x3x3 nodes (--denoise off keeps them)\n",
                    args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, kDenoiseNeighbours,
                    smoothed.mean_move / h);
     }

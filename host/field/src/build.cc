@@ -128,6 +128,10 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     }
     result.seconds_distance = SecondsSince(start);
   }
+  if (options.smooth_band) {
+    result.field.SmoothBand();
+    result.field.ProjectLipschitz();
+  }
   result.inside_nodes = result.field.CountInside();
   report(1.0);
   return result;

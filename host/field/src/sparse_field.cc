@@ -1,12 +1,14 @@
 #include "palpa/field/sparse_field.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <memory>
 #include <utility>
+#include <vector>
 
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
@@ -423,6 +425,59 @@ std::size_t SparseField::LabelUnallocatedBricks() {
     slots_[b] = cv[0] > cv[1] ? kUniformInside : kUniformOutside;
   }
   return minority;
+}
+
+void SparseField::SmoothBand() {
+  const auto band = static_cast<float>(grid_.band_voxels);
+  std::vector<std::size_t> bricks;
+  for (std::size_t b = 0; b < slots_.size(); ++b)
+    if (slots_[b] >= 0) bricks.push_back(b);
+  // Every brick reads the unfiltered field: the results wait here until all are computed.
+  std::vector<float> out(bricks.size() * kBrickNodes);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 4), [&](const auto& r) {
+    constexpr int kH = kBrick + 2;  // one node of halo on each side
+    std::array<float, kH * kH * kH> x{}, y{};
+    const auto at = [](int a, int b, int c) { return static_cast<std::size_t>((a * kH + b) * kH + c); };
+    for (std::size_t m = r.begin(); m != r.end(); ++m) {
+      const std::array<int, 3> bc = BrickCoords(bricks[m]);
+      const BrickBox box = Box(bc[0], bc[1], bc[2]);
+      // The halo, nodes past the grid's edge replaced by the nearest grid node.
+      for (int a = 0; a < kH; ++a)
+        for (int b = 0; b < kH; ++b)
+          for (int c = 0; c < kH; ++c) {
+            const int i = std::clamp(bc[0] * kBrick + a - 1, 0, grid_.dims[0] - 1);
+            const int j = std::clamp(bc[1] * kBrick + b - 1, 0, grid_.dims[1] - 1);
+            const int k = std::clamp(bc[2] * kBrick + c - 1, 0, grid_.dims[2] - 1);
+            x[at(a, b, c)] = Value(i, j, k);
+          }
+      // Separable passes: x over the brick's rows and the halo's y, z; then y; then z.
+      for (int a = 1; a <= kBrick; ++a)
+        for (int b = 0; b < kH; ++b)
+          for (int c = 0; c < kH; ++c)
+            y[at(a, b, c)] = 0.25f * (x[at(a - 1, b, c)] + x[at(a + 1, b, c)]) + 0.5f * x[at(a, b, c)];
+      for (int a = 1; a <= kBrick; ++a)
+        for (int b = 1; b <= kBrick; ++b)
+          for (int c = 0; c < kH; ++c)
+            x[at(a, b, c)] = 0.25f * (y[at(a, b - 1, c)] + y[at(a, b + 1, c)]) + 0.5f * y[at(a, b, c)];
+      float* dst = out.data() + m * kBrickNodes;
+      const float* src = Stored(slots_[bricks[m]]);
+      for (int a = 0; a < kBrick; ++a)
+        for (int b = 0; b < kBrick; ++b)
+          for (int c = 0; c < kBrick; ++c) {
+            const std::size_t local = static_cast<std::size_t>((a * kBrick + b) * kBrick + c);
+            // Nodes past the grid's edge (the last brick of an axis) keep their values.
+            if (a >= box.n[0] || b >= box.n[1] || c >= box.n[2]) {
+              dst[local] = src[local];
+              continue;
+            }
+            const float v =
+                0.25f * (x[at(a + 1, b + 1, c)] + x[at(a + 1, b + 1, c + 2)]) + 0.5f * x[at(a + 1, b + 1, c + 1)];
+            dst[local] = std::clamp(v, -band, band);
+          }
+    }
+  });
+  for (std::size_t m = 0; m < bricks.size(); ++m)
+    std::memcpy(Stored(slots_[bricks[m]]), out.data() + m * kBrickNodes, kBrickNodes * sizeof(float));
 }
 
 SparseField::LipschitzStats SparseField::ProjectLipschitz() {

@@ -39,6 +39,10 @@ struct BuildOptions {
   // voxel, up to half the samples' longest side per side) to hold the closure, and build again
   // (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.
   bool grow_for_closure = true;
+  // Filter the finished field once (SparseField::SmoothBand, then ProjectLipschitz): what palpa
+  // build does after it denoised noisy samples (issue 20), to average the noise the samples'
+  // fits leave. Any method.
+  bool smooth_band = false;
 };
 
 struct BuildResult {
