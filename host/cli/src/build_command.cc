@@ -78,9 +78,8 @@ constexpr std::size_t kMinUsableSamples = 4;
 // samples at 300 cells: mean |error| 0.013 / 0.016 / 0.024 voxels and wrong sign in the band
 // 0.30 / 0.38 / 0.57 % at 1 / 1.5 / 2 voxels; the packing's time falls with the count.
 constexpr double kDenseCellVoxels = 1.5;
-// --denoise auto (issue 20): knot1 / fandisk / sphere, sigma = 0.5 and 1 voxel, 150 cells: band
-// mean 0.235 / 0.462, 0.265 / 0.501, 0.242 / 0.469 -> 0.133 / 0.239, 0.172 / 0.290, 0.162 / 0.227
-// voxels with two passes of 48 neighbours (one pass: 0.144 / 0.263 ...; 32: 0.155 / 0.283 ...).
+// --denoise auto (issue 20): the noise measure's wider fit (SmoothNoisyPositions); the samples
+// then move by their 16 nearest (docs/field-methods.md § Noise).
 constexpr std::size_t kDenoiseNeighbours = 48;
 constexpr double kDenoiseVoxels = 0.25;
 
@@ -215,16 +214,16 @@ int RunBuild(const BuildArgs& args) {
       const double h = grid->voxel_m;
       const field::NoiseSmoothing smoothed =
           field::SmoothNoisyPositions(device.positions, device.normals, kDenoiseNeighbours, kDenoiseVoxels * h);
-      // What the fits leave is noise at the sample spacing: one binomial filter of the field
-      // averages it (bull, sigma = 1 voxel: band mean 0.368 -> 0.347, wrong sign 6.16 -> 5.31 %).
+      // What the moves leave is noise at the sample spacing: one binomial filter of the field
+      // averages it (bull, sigma = 1 voxel: band mean 0.289 -> 0.271, wrong sign 4.82 -> 4.23 %).
       options.smooth_band = smoothed.Applied();
       if (smoothed.Applied() && !args.quiet)
         fmt::print(stderr,
-                   "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved onto the "
-                   "quadric of their {} nearest samples with agreeing normals (twice), {:.2f} voxels on average, "
-                   "and the field filtered once over 3x3x3 nodes (--denoise off keeps them)\n",
-                   args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, kDenoiseNeighbours,
-                   smoothed.mean_move / h);
+                   "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved along "
+                   "their normals towards the surface their 16 nearest samples' positions and normals agree on "
+                   "(3 passes), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes (--denoise "
+                   "off keeps them)\n",
+                   args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, smoothed.mean_move / h);
     }
   }
   field::BuildResult built;
