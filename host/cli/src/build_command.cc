@@ -79,7 +79,7 @@ constexpr std::size_t kMinUsableSamples = 4;
 // 0.30 / 0.38 / 0.57 % at 1 / 1.5 / 2 voxels; the packing's time falls with the count.
 constexpr double kDenseCellVoxels = 1.5;
 // --denoise auto (issue 20): the noise measure's wider fit (SmoothNoisyPositions); the samples
-// then move by their 16 nearest (docs/field-methods.md § Noise).
+// then move by their 16-64 nearest (docs/field-methods.md § Noise).
 constexpr std::size_t kDenoiseNeighbours = 48;
 constexpr double kDenoiseVoxels = 0.25;
 
@@ -215,12 +215,13 @@ int RunBuild(const BuildArgs& args) {
       const field::NoiseSmoothing smoothed =
           field::SmoothNoisyPositions(device.positions, device.normals, kDenoiseNeighbours, kDenoiseVoxels * h);
       // What the moves leave is noise at the sample spacing: one binomial filter of the field
-      // averages it (bull, sigma = 1 voxel: band mean 0.289 -> 0.271, wrong sign 4.82 -> 4.23 %).
+      // averages it (bull, sigma = 1 voxel, the 16-sample move: band mean 0.289 -> 0.271, wrong
+      // sign 4.82 -> 4.23 %).
       options.smooth_band = smoothed.Applied();
       if (smoothed.Applied() && !args.quiet)
         fmt::print(stderr,
                    "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved along "
-                   "their normals towards the surface their 16 nearest samples' positions and normals agree on "
+                   "their normals towards the surface their 16-64 nearest samples' positions and normals agree on "
                    "(3 passes), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes (--denoise "
                    "off keeps them)\n",
                    args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, smoothed.mean_move / h);

@@ -343,11 +343,18 @@ namespace {
 
 constexpr double kMaxMoveNoise = 2.5;
 constexpr double kShapeGrowth2 = 4.0;  // the squared growth of a shape's residual, 16 -> 48 neighbours
-// The bisector move (SmoothNoisyPositions): neighbours, their normals' agreement, and the step.
-// Noise rows of knot1, fandisk, sphere, CGAL's bull and femur (150 cells, sigma = 0.5 / 1 voxel):
-// 16 neighbours and 3 passes; 12 or 24, 2 or 4 passes within 0.02 voxel of it; a full step
-// (1 instead of 1/2) moves each sample by its neighbours' noise too (bull 0.27 -> 0.31 voxel RMS).
-constexpr std::size_t kBisectorNeighbours = 16;
+// The bisector move (SmoothNoisyPositions). Its neighbourhood is chosen per sample among the
+// 16, 32 and 64 nearest by the intersection of confidence intervals (Katkovnik's LPA-ICI): the
+// mean over the larger neighbourhood is taken while its interval, mean +- kIciWidth x noise /
+// sqrt(count), still meets every smaller one's; a turning surface moves the mean out of them.
+// Noise rows of knot1, fandisk, sphere, CGAL's bull and femur (150 cells, sigma = 0.5 / 1 voxel)
+// and data/sphere_20k_normal.xyz (noise ~1.6 sample spacings, 22-degree normal noise): 16 alone
+// is best on the bull and 48-64 on the sphere; a width of 1 or 2 loses one or the other, 1.25
+// keeps both (docs/field-methods.md § Noise: the bisector move). A full step (1 instead of 1/2)
+// moves each sample by its neighbours' noise too (bull 0.27 -> 0.31 voxel RMS at 16).
+constexpr std::size_t kBisectorMinNeighbours = 16;
+constexpr std::size_t kBisectorMaxNeighbours = 64;
+constexpr double kIciWidth = 1.25;
 constexpr double kBisectorCos = 0.5;  // within 60 degrees: a sharp edge's other face never
 constexpr double kBisectorStep = 0.5;
 
@@ -406,30 +413,42 @@ NoiseSmoothing MeasureNoise(const std::vector<Eigen::Vector3d>& positions, const
 }
 
 // One Jacobi pass of the bisector move: the offset of each sample along its normal, from the
-// positions as they were; returns how many samples moved.
+// positions as they were; `noise` sets the confidence intervals. Returns how many samples moved.
 std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
-                         double cap) {
+                         double noise, double cap) {
   const std::size_t n = positions.size();
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   std::vector<double> move(n, std::numeric_limits<double>::quiet_NaN());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
-    std::array<std::size_t, kBisectorNeighbours + 1> idx{};
-    std::array<double, kBisectorNeighbours + 1> d2{};
+    std::array<std::size_t, kBisectorMaxNeighbours + 1> idx{};
+    std::array<double, kBisectorMaxNeighbours + 1> d2{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const Eigen::Vector3d& p = positions[i];
       const Eigen::Vector3d& nrm = normals[i];
       const std::size_t got = tree.knnSearch(p.data(), idx.size(), idx.data(), d2.data());
       double sum = 0.0;
       int used = 0;
+      double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+      double chosen = std::numeric_limits<double>::quiet_NaN();
+      std::size_t test_at = kBisectorMinNeighbours;  // the neighbourhoods: nearest 16, 32, 64 (self included)
       for (std::size_t m = 0; m < got; ++m) {
         const std::size_t j = idx[m];
         const double c = normals[j].dot(nrm);
-        if (j == i || c < kBisectorCos) continue;
-        sum += (nrm + normals[j]).dot(positions[j] - p) / (1.0 + c);
-        ++used;
+        if (j != i && c >= kBisectorCos) {
+          sum += (nrm + normals[j]).dot(positions[j] - p) / (1.0 + c);
+          ++used;
+        }
+        if (m != test_at && m + 1 != got) continue;
+        test_at *= 2;
+        if (used < 2) continue;
+        const double mean = sum / used, half = kIciWidth * noise / std::sqrt(static_cast<double>(used));
+        lo = std::max(lo, mean - half);
+        hi = std::min(hi, mean + half);
+        if (lo > hi && !std::isnan(chosen)) break;
+        chosen = mean;
       }
-      if (used >= 2) move[i] = std::clamp(kBisectorStep * sum / used, -cap, cap);
+      if (!std::isnan(chosen)) move[i] = std::clamp(kBisectorStep * chosen, -cap, cap);
     }
   });
   std::size_t moved = 0;
@@ -459,7 +478,8 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   const std::vector<Eigen::Vector3d> before = positions;
   // A move beyond kMaxMoveNoise x the residual is the shape (a detail finer than the neighbours),
   // not noise.
-  for (int pass = 0; pass < passes; ++pass) BisectorPass(positions, normals, kMaxMoveNoise * out.residual);
+  for (int pass = 0; pass < passes; ++pass)
+    BisectorPass(positions, normals, out.residual, kMaxMoveNoise * out.residual);
   double total = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     const double d = (positions[i] - before[i]).norm();

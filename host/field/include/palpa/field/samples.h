@@ -133,15 +133,16 @@ struct NoiseSmoothing {
 /// detailed surface) a growing one, and the noise is the part that does not grow
 /// (`NoiseSmoothing::noise`). When it exceeds `threshold` (units of the positions; clean samples,
 /// sparse ones included, stay far below), every sample moves along its normal, in `passes` Jacobi
-/// passes, by half the mean over its 16 nearest samples j with n_j . n_i >= 0.5 (at least 2) of
+/// passes, by half the mean over its nearest samples j with n_j . n_i >= 0.5 (at least 2) of
 ///   t_ij = (n_i + n_j) . (P_j - P_i) / (1 + n_i . n_j),
-/// capped at 2.5 x the 16-sample residual. On a smooth surface the chord between two samples is
-/// perpendicular to the sum of their normals to second order at any curvature (exactly on a
-/// sphere), so t_ij is minus P_i's offset from the surface plus P_j's noise: an estimate without
-/// the bias a fitted height function has where the surface turns within the neighbourhood (the
-/// legs and horns of CGAL's bull: 0.41-0.53 voxel of 0.5 left by 48-sample quadrics, where the
-/// normals turn by more than 37 degrees within 16 samples) and without mixing the faces of a sharp
-/// edge or the two sides of a thin wall (CGAL's jet_smooth_point_set rounds fandisk's edges,
+/// capped at 2.5 x the 16-sample residual; the nearest 16, 32 or 64, the largest whose mean's
+/// interval (+- 1.25 x the residual / sqrt(count)) meets the smaller ones' (LPA-ICI: a larger
+/// neighbourhood averages more noise until the surface turns within it). On a smooth surface the chord between two
+/// samples is perpendicular to the sum of their normals to second order at any curvature (exactly on a sphere), so t_ij
+/// is minus P_i's offset from the surface plus P_j's noise: an estimate without the bias a fitted height function has
+/// where the surface turns within the neighbourhood (the legs and horns of CGAL's bull: 0.41-0.53 voxel of 0.5 left by
+/// 48-sample quadrics, where the normals turn by more than 37 degrees within 16 samples) and without mixing the faces
+/// of a sharp edge or the two sides of a thin wall (CGAL's jet_smooth_point_set rounds fandisk's edges,
 /// bilateral_smooth_point_set shrinks curved parts). It needs the normals' direction: 15-degree
 /// normal noise costs it about as much as it gains (docs/field-methods.md § Noise). Normals are
 /// kept. Shapes: positions and normals of equal length, normals unit; fewer than `neighbours` + 1
