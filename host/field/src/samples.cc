@@ -413,9 +413,9 @@ NoiseSmoothing MeasureNoise(const std::vector<Eigen::Vector3d>& positions, const
 }
 
 // One Jacobi pass of the bisector move: the offset of each sample along its normal, from the
-// positions as they were; `noise` sets the confidence intervals. Returns how many samples moved.
-std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
-                         double noise, double cap) {
+// positions as they were; `noise` sets the confidence intervals, `cap` bounds each move.
+void BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals, double noise,
+                  double cap) {
   const std::size_t n = positions.size();
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
@@ -431,7 +431,7 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
       int used = 0;
       double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
       double chosen = std::numeric_limits<double>::quiet_NaN();
-      std::size_t test_at = kBisectorMinNeighbours;  // the neighbourhoods: nearest 16, 32, 64 (self included)
+      std::size_t test_at = kBisectorMinNeighbours;  // idx[0..test_at]: itself and its nearest 16, 32, 64
       for (std::size_t m = 0; m < got; ++m) {
         const std::size_t j = idx[m];
         const double c = normals[j].dot(nrm);
@@ -451,13 +451,8 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
       if (!std::isnan(chosen)) move[i] = std::clamp(kBisectorStep * chosen, -cap, cap);
     }
   });
-  std::size_t moved = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (std::isnan(move[i])) continue;
-    positions[i] += move[i] * normals[i];
-    ++moved;
-  }
-  return moved;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!std::isnan(move[i])) positions[i] += move[i] * normals[i];
 }
 
 }  // namespace
