@@ -82,9 +82,9 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
                        residual.begin() + static_cast<std::ptrdiff_t>(got));
       offset[i] = residual[got / 2];
       // Every neighbour: the residual of a surface's own curvature is ~0, of noise the noise.
-      const detail::QuadricFit fit = detail::FitQuadric(positions, idx.data(), got, positions[i], start[i],
-                                                        std::sqrt(d2[got - 1]), 8, [](std::size_t) { return true; });
-      quadric[i] = std::max(fit.rms, 0.0);
+      quadric[i] = std::max(detail::QuadricResidual(positions, idx.data(), got, positions[i], start[i],
+                                                    std::sqrt(d2[got - 1]), 8, [](std::size_t) { return true; }),
+                            0.0);
     }
   });
   const double sigma = detail::Median(std::move(offset)) / 0.674;

@@ -46,19 +46,15 @@ inline double Median(std::vector<double> values) {
   return *mid;
 }
 
-// A least-squares quadric height over the tangent plane of `normal` at `p`: h(u, v) = c0 + c1 u +
-// c2 v + c3 u^2 + c4 uv + c5 v^2 through the samples idx[0..count) that `use(j)` accepts, u, v and
-// h in units of `scale` (a well-conditioned fit). `height` is c0 and `rms` the RMS residual over
-// (used - 6) degrees of freedom, both in model units; rms < 0 when fewer than `min_used` samples
-// were accepted or the fit is not finite. The normal estimate's noise figure and the denoising
-// pass both use it (normals.cc, samples.cc).
-struct QuadricFit {
-  double height = 0.0;
-  double rms = -1.0;
-};
+// The RMS residual of a least-squares quadric height over the tangent plane of `normal` at `p`,
+// h(u, v) = c0 + c1 u + c2 v + c3 u^2 + c4 uv + c5 v^2, through the samples idx[0..count) that
+// `use(j)` accepts (u, v and h in units of `scale`: a well-conditioned fit), over (used - 6)
+// degrees of freedom, in model units; < 0 when fewer than `min_used` samples were accepted or the
+// fit is not finite. A smooth surface leaves ~0, noise the noise: the normal estimate's noise
+// figure and the denoiser's noise measure (normals.cc, samples.cc).
 template <class Use>
-QuadricFit FitQuadric(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx, std::size_t count,
-                      const Eigen::Vector3d& p, const Eigen::Vector3d& normal, double scale, int min_used, Use use) {
+double QuadricResidual(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx, std::size_t count,
+                       const Eigen::Vector3d& p, const Eigen::Vector3d& normal, double scale, int min_used, Use use) {
   using M6 = Eigen::Matrix<double, 6, 6>;
   using V6 = Eigen::Matrix<double, 6, 1>;
   const Eigen::Vector3d axis = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
@@ -77,10 +73,10 @@ QuadricFit FitQuadric(const std::vector<Eigen::Vector3d>& positions, const std::
     rhs += row * d.dot(normal);
     ++used;
   }
-  if (used < min_used) return {};
+  if (used < min_used) return -1.0;
   m.diagonal().array() += 1e-9;
   const V6 c = m.ldlt().solve(rhs);
-  if (!c.allFinite()) return {};
+  if (!c.allFinite()) return -1.0;
   double sum2 = 0.0;
   for (std::size_t a = 0; a < count; ++a) {
     if (!use(idx[a])) continue;
@@ -89,7 +85,7 @@ QuadricFit FitQuadric(const std::vector<Eigen::Vector3d>& positions, const std::
     const double e = d.dot(normal) - (c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v);
     sum2 += e * e;
   }
-  return {c[0] * scale, std::sqrt(sum2 / std::max(used - 6, 1)) * scale};
+  return std::sqrt(sum2 / std::max(used - 6, 1)) * scale;
 }
 
 }  // namespace palpa::field::detail

@@ -381,11 +381,11 @@ NoiseSmoothing MeasureNoise(const std::vector<Eigen::Vector3d>& positions, const
       // Over the first `count` neighbours (nearest first, the sample itself included), those
       // whose normals agree.
       const auto fit = [&](std::size_t count) {
-        return detail::FitQuadric(positions, idx.data(), count, p, nrm, scale, kMinFit + 1,
-                                  [&](std::size_t j) { return normals[j].dot(nrm) >= kAgreeCos; });
+        return detail::QuadricResidual(positions, idx.data(), count, p, nrm, scale, kMinFit + 1,
+                                       [&](std::size_t j) { return normals[j].dot(nrm) >= kAgreeCos; });
       };
-      residual[i] = fit(std::min(got, kNoiseNeighbours + 1)).rms;
-      wide_residual[i] = fit(got).rms;
+      residual[i] = fit(std::min(got, kNoiseNeighbours + 1));
+      wide_residual[i] = fit(got);
     }
   });
   // Over the samples fitted (a residual of -1: too few agreeing normals); -1 when none was.
@@ -413,12 +413,11 @@ NoiseSmoothing MeasureNoise(const std::vector<Eigen::Vector3d>& positions, const
 }
 
 // One Jacobi pass of the bisector move: the offset of each sample along its normal, from the
-// positions as they were; `noise` sets the confidence intervals, `cap` bounds each move.
-void BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals, double noise,
-                  double cap) {
+// positions as they were (`tree` indexes them); `noise` sets the confidence intervals, `cap`
+// bounds each move.
+void BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
+                  const detail::KdTree& tree, double noise, double cap) {
   const std::size_t n = positions.size();
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   std::vector<double> move(n, std::numeric_limits<double>::quiet_NaN());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
     std::array<std::size_t, kBisectorMaxNeighbours + 1> idx{};
@@ -463,18 +462,21 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   constexpr std::size_t kMinNeighbours = 8;
   const std::size_t n = positions.size();
   if (n <= neighbours || normals.size() != n || neighbours < kMinNeighbours) return {};
+  const detail::PointCloud cloud{&positions};
   NoiseSmoothing out;
-  {
-    const detail::PointCloud cloud{&positions};
+  std::vector<Eigen::Vector3d> before;
+  // Each pass indexes the positions the previous one left; the first, the measure's.
+  for (int pass = 0; pass < std::max(passes, 1); ++pass) {
     const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-    out = MeasureNoise(positions, normals, tree, neighbours);
+    if (pass == 0) {
+      out = MeasureNoise(positions, normals, tree, neighbours);
+      if (!(out.noise > threshold)) return out;
+      before = positions;
+    }
+    // A move beyond kMaxMoveNoise x the residual is the shape (a detail finer than the
+    // neighbours), not noise.
+    if (pass < passes) BisectorPass(positions, normals, tree, out.residual, kMaxMoveNoise * out.residual);
   }
-  if (!(out.noise > threshold)) return out;
-  const std::vector<Eigen::Vector3d> before = positions;
-  // A move beyond kMaxMoveNoise x the residual is the shape (a detail finer than the neighbours),
-  // not noise.
-  for (int pass = 0; pass < passes; ++pass)
-    BisectorPass(positions, normals, out.residual, kMaxMoveNoise * out.residual);
   double total = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     const double d = (positions[i] - before[i]).norm();
