@@ -152,7 +152,8 @@ TEST_F(Cli, BarePositionsAreEstimatedAndFlippedNormalsAreReoriented) {
   const std::string bare_in = Write("bare.xyz", bare);
   const Outcome b = Palpa("build " + bare_in + " -o " + Path("bare.palpa") + " --cells 48");
   ASSERT_EQ(b.code, 0) << b.out;
-  EXPECT_NE(b.out.find("926 normals estimated (jet fit, 18 neighbours) and oriented: 1 piece (1 closed, 0 open) (the "
+  EXPECT_NE(b.out.find("926 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece (1 "
+                       "closed, 0 open) (the "
                        "file has no normals)"),
             std::string::npos)
       << b.out;

@@ -122,7 +122,7 @@ int RunBuild(const BuildArgs& args) {
                    "were estimated\n",
                    args.points, before, points->positions.size());
     }
-    field::EstimateNormalLines(points->positions, points->normals);  // lines; signs below
+    normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
     normals_report.estimated = points->positions.size();
   }
   const field::DroppedSamples dropped = field::DropDegenerateSamples(*points, args.points);

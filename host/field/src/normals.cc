@@ -58,6 +58,36 @@ struct UnionFind {
 
 }  // namespace
 
+int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
+  detail::JetNormalLines(positions, kCleanNormalNeighbours, normals);
+  const std::size_t n = positions.size();
+  if (n <= static_cast<std::size_t>(kCleanNormalNeighbours)) return kCleanNormalNeighbours;
+  // The noise relative to the spacing, over the same 10 nearest (wider, the fit of a sample on a
+  // thin part would count the part's other side as noise), on at most 20,000 samples.
+  const std::size_t stride = (n + 19'999) / 20'000;
+  const std::size_t count = (n + stride - 1) / stride;
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  constexpr auto k = static_cast<std::size_t>(kCleanNormalNeighbours);
+  std::vector<double> relative(count);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& r) {
+    std::vector<std::size_t> idx(k + 1);
+    std::vector<double> d2(k + 1);
+    for (std::size_t s = r.begin(); s != r.end(); ++s) {
+      const std::size_t i = s * stride;
+      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
+      const double eighth = std::sqrt(d2[std::min<std::size_t>(8, got - 1)]);
+      const double residual = detail::QuadricResidual(positions, idx.data(), got, positions[i], normals[i],
+                                                      std::sqrt(d2[got - 1]), 8, [](std::size_t) { return true; });
+      relative[s] = eighth > 0 ? std::max(residual, 0.0) / eighth : 0.0;
+    }
+  });
+  const double noise = detail::Median(std::move(relative));
+  if (noise < kCleanNoise) return kCleanNormalNeighbours;
+  detail::JetNormalLines(positions, kNormalNeighbours, normals);
+  return kNormalNeighbours;
+}
+
 void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
   const std::size_t n = positions.size();
   if (n < 8 || normals.size() != n) return;
@@ -159,9 +189,9 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
 
 std::string NormalsReport::Describe() const {
   std::string what =
-      estimated > 0
-          ? fmt::format("{} normals estimated (jet fit, {} neighbours) and oriented", estimated, kNormalNeighbours)
-          : fmt::format("normals oriented, {} sign{} changed", flipped, flipped == 1 ? "" : "s");
+      estimated > 0 ? fmt::format("{} normals estimated (jet fit, {} neighbours{}) and oriented", estimated, neighbours,
+                                  neighbours == kCleanNormalNeighbours ? ": the samples are clean" : "")
+                    : fmt::format("normals oriented, {} sign{} changed", flipped, flipped == 1 ? "" : "s");
   return fmt::format("{}: {} piece{} ({} closed, {} open)", what, components, components == 1 ? "" : "s",
                      components - open_components, open_components);
 }

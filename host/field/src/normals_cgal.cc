@@ -6,11 +6,12 @@
 #include <utility>
 #include <vector>
 
-#include "palpa/field/normals.h"
+#include "point_cloud.h"
 
-namespace palpa::field {
+namespace palpa::field::detail {
 
-void EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals) {
+void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
+                    std::vector<Eigen::Vector3d>& normals) {
   using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
   using PointWithNormal = std::pair<Kernel::Point_3, Kernel::Vector_3>;
   normals.assign(positions.size(), Eigen::Vector3d::UnitZ());
@@ -19,7 +20,8 @@ void EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vec
   points.reserve(positions.size());
   for (const Eigen::Vector3d& p : positions)
     points.emplace_back(Kernel::Point_3(p.x(), p.y(), p.z()), Kernel::Vector_3());
-  const auto k = static_cast<unsigned>(std::min<std::size_t>(kNormalNeighbours, positions.size() - 1));
+  const auto k =
+      static_cast<unsigned>(std::min<std::size_t>(static_cast<std::size_t>(neighbours), positions.size() - 1));
   CGAL::jet_estimate_normals<CGAL::Parallel_if_available_tag>(
       points, k,
       CGAL::parameters::point_map(CGAL::First_of_pair_property_map<PointWithNormal>())
@@ -33,4 +35,4 @@ void EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vec
   }
 }
 
-}  // namespace palpa::field
+}  // namespace palpa::field::detail

@@ -37,6 +37,11 @@ using KdTree =
 // a tie at the kth distance goes to the sample visited first, so their results follow the tree.
 inline constexpr std::size_t kRangeLeaf = 24;
 
+// Unit normal lines from CGAL::jet_estimate_normals over the `neighbours` nearest samples (signs
+// arbitrary); (0, 0, 1) where the fit fails, and for fewer than 4 positions. normals_cgal.cc.
+void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
+                    std::vector<Eigen::Vector3d>& normals);
+
 // The median of `values` (the upper one of an even count), 0 when there are none: the one scale
 // of a sample set (spacing, noise) that a few outliers cannot move.
 inline double Median(std::vector<double> values) {

@@ -4,8 +4,9 @@
 // need outward unit normals first. Host only, non-RT.
 //
 //  estimate: the normal line of each sample from a jet fit (CGAL::jet_estimate_normals, Cazals &
-//            Pouget 2003: a degree-2 height function fitted to the 18 nearest samples), then
-//            oriented as below, then sharpened at edges (RefineNormalLines).
+//            Pouget 2003: a degree-2 height function fitted to the 18 nearest samples, or to the
+//            10 nearest when the samples are clean), then oriented as below, then sharpened at
+//            edges (RefineNormalLines).
 //  orient:   keeps each normal's line and chooses its sign as below.
 // Orientation: Hoppe et al. 1992 ("Surface reconstruction from unorganized points", §3.3): a
 // minimum spanning tree of the k-nearest-neighbour graph with edge cost 1 - |n_i . n_j| carries one
@@ -42,19 +43,31 @@ struct NormalsReport {
   std::size_t flipped = 0;          ///< orient: normals whose sign was changed from the file's
   std::size_t components = 0;       ///< connected pieces of the neighbour graph
   std::size_t open_components = 0;  ///< of which open (sign from the majority or the divergence sum)
+  int neighbours = 0;               ///< of the jet fit (EstimateNormalLines' result), when estimated
   /// "5,210 normals estimated (jet fit, 18 neighbours) and oriented: 1 piece (closed)"
   std::string Describe() const;
 };
 
-/// Number of neighbours of the jet fit and of the orientation graph.
+/// Number of neighbours of the jet fit (noisy samples; clean ones) and of the orientation graph.
 inline constexpr int kNormalNeighbours = 18;
+inline constexpr int kCleanNormalNeighbours = 10;
 inline constexpr int kOrientNeighbours = 12;
+/// Samples are clean when the median over them of (RMS residual of a quadric fitted to the 16
+/// nearest along the 18-neighbour jet normal) / (distance to the 8th nearest) is below this:
+/// 0.011-0.056 on exact samples of 13 meshes, 0.05-0.10 at 0.25 voxel of position noise (150
+/// cells), 0.093-0.19 at 0.5 voxel.
+inline constexpr double kCleanNoise = 0.075;
 
 /// Replaces `normals` (resized to positions.size()) by unit normal lines from a degree-2 jet fit
-/// over the kNormalNeighbours nearest samples (CGAL::jet_estimate_normals); signs arbitrary until
-/// OrientNormals. Positions in any units, finite; at least 4 of them (else normals are (0, 0, 1)).
-/// Parallel.
-void EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals);
+/// (CGAL::jet_estimate_normals); signs arbitrary until OrientNormals. Fits the kNormalNeighbours
+/// nearest samples, then, where the set is clean (kCleanNoise), fits again the
+/// kCleanNormalNeighbours nearest: 18 average the noise of a scan, but on clean samples span both
+/// sides of parts a few spacings thick and blend the facets of low-polygon meshes (10 CGAL meshes
+/// never tuned on, exact samples, normals stripped: wrong sign in the band 1.18-5.54x that with
+/// exact normals with 18, 1.18-2.27x with 10; bench/field/robustness.py --seed 2). Returns the
+/// neighbour count of the normals given. Positions in any units, finite; at least 4 of them (else
+/// normals are (0, 0, 1)). Parallel, deterministic.
+int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals);
 
 /// Sharpens estimated normals at edges, keeping each one's sign. Per sample: of the planes through
 /// P_i with its 16 nearest samples' normals or through P_i and two of its 12 nearest, the one most
