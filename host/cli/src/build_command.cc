@@ -79,7 +79,7 @@ constexpr std::size_t kMinUsableSamples = 4;
 // 0.30 / 0.38 / 0.57 % at 1 / 1.5 / 2 voxels; the packing's time falls with the count.
 constexpr double kDenseCellVoxels = 1.5;
 // --denoise auto (issue 20): the noise measure's wider fit (SmoothNoisyPositions); the samples
-// then move by their 16-64 nearest (docs/field-methods.md § Noise).
+// then move by their kMoveFewestNeighbours-kMoveMostNeighbours nearest (docs/field-methods.md § Noise).
 constexpr std::size_t kDenoiseNeighbours = 48;
 constexpr double kDenoiseVoxels = 0.25;
 
@@ -103,6 +103,9 @@ int RunBuild(const BuildArgs& args) {
     return kExitBadInput;
   }
   const std::size_t read_count = points->positions.size();
+  // Dropping degenerate samples or thinning below moves the middle 99.8 % of a set little: one
+  // provisional voxel serves both thinnings.
+  const double provisional_voxel = ProvisionalVoxel(*points, args);
   // --normals (issue 20): a file of bare positions is always estimated; estimate replaces the
   // file's normals before the degenerate ones would be dropped, orient keeps their lines.
   const field::NormalsMode normals_mode = !points->has_normals         ? field::NormalsMode::kEstimate
@@ -113,7 +116,7 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode == field::NormalsMode::kEstimate) {
     // A dense scan is thinned by position first: the jet fit, the orientation and the edge
     // refinement over 2,000,000 points took a minute, for samples the thinning below merges anyway.
-    if (const double cell = ProvisionalVoxel(*points, args) / 2; cell > 0) {
+    if (const double cell = provisional_voxel / 2; cell > 0) {
       const std::size_t before = points->positions.size();
       points->normals.assign(before, Eigen::Vector3d::UnitZ());  // one group per cell: by position only
       if (field::SimplifyDenseSamples(*points, cell).Applied() && !args.quiet)
@@ -151,7 +154,7 @@ int RunBuild(const BuildArgs& args) {
   // more than the build): to half the voxel the fit will give, from the bounding box of the
   // middle 99.8 % of the samples per axis (a far outlier must not set the scale). The build
   // thins it again per voxel once the grid is known (below).
-  if (const double cell = ProvisionalVoxel(*points, args) / 2; cell > 0) {
+  if (const double cell = provisional_voxel / 2; cell > 0) {
     const std::size_t before = points->positions.size();
     if (field::SimplifyDenseSamples(*points, cell).Applied() && !args.quiet)
       fmt::print(stderr, "palpa build: note: {}: {} samples thinned to {} (half a voxel) before the outlier search\n",
@@ -221,10 +224,12 @@ int RunBuild(const BuildArgs& args) {
       if (smoothed.Applied() && !args.quiet)
         fmt::print(stderr,
                    "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved along "
-                   "their normals towards the surface their 16-64 nearest samples' positions and normals agree on "
-                   "(3 passes), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes (--denoise "
+                   "their normals towards the surface their {}-{} nearest samples' positions and normals agree on "
+                   "({} pass{}), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes (--denoise "
                    "off keeps them)\n",
-                   args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, smoothed.mean_move / h);
+                   args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved, field::kMoveFewestNeighbours,
+                   field::kMoveMostNeighbours, smoothed.passes, smoothed.passes == 1 ? "" : "es",
+                   smoothed.mean_move / h);
     }
   }
   field::BuildResult built;

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "commands.h"
+#include "palpa/field/samples.h"
 #include "palpa/io/escape.h"
 
 int main(int argc, char** argv) {
@@ -66,8 +67,11 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"keep", "orient", "estimate"}));
   build
       ->add_option("--denoise", b.denoise,
-                   "auto: when the samples' position noise exceeds a quarter voxel RMS, move each onto the quadric "
-                   "fitted to its 48 nearest samples with agreeing normals (default); off: never")
+                   fmt::format("auto: when the samples' position noise exceeds a quarter voxel RMS, move each "
+                               "along its normal towards the surface its {}-{} nearest samples agree on ({} passes), "
+                               "then filter the field once over 3x3x3 nodes (default); off: never",
+                               palpa::field::kMoveFewestNeighbours, palpa::field::kMoveMostNeighbours,
+                               palpa::field::kMovePasses))
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "off"}));
   build->add_flag("--strict", b.strict,

@@ -352,8 +352,8 @@ constexpr double kShapeGrowth2 = 4.0;  // the squared growth of a shape's residu
 // is best on the bull and 48-64 on the sphere; a width of 1 or 2 loses one or the other, 1.25
 // keeps both (docs/field-methods.md § Noise: the bisector move). A full step (1 instead of 1/2)
 // moves each sample by its neighbours' noise too (bull 0.27 -> 0.31 voxel RMS at 16).
-constexpr std::size_t kBisectorMinNeighbours = 16;
-constexpr std::size_t kBisectorMaxNeighbours = 64;
+constexpr std::size_t kBisectorMinNeighbours = kMoveFewestNeighbours;
+constexpr std::size_t kBisectorMaxNeighbours = kMoveMostNeighbours;
 constexpr double kIciWidth = 1.25;
 constexpr double kBisectorCos = 0.5;  // within 60 degrees: a sharp edge's other face never
 constexpr double kBisectorStep = 0.5;
@@ -486,6 +486,7 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
     }
   }
   out.mean_move = out.moved > 0 ? total / static_cast<double>(out.moved) : 0.0;
+  out.passes = std::max(passes, 0);
   return out;
 }
 

@@ -115,6 +115,11 @@ struct Simplification {
 /// then first sample. Deterministic. O(n log n). Positions finite, normals unit.
 Simplification SimplifyDenseSamples(PointSet& points, double cell);
 
+/// SmoothNoisyPositions' move: its neighbourhoods (the nearest 16, 32 or 64) and default passes.
+inline constexpr std::size_t kMoveFewestNeighbours = 16;
+inline constexpr std::size_t kMoveMostNeighbours = 64;
+inline constexpr int kMovePasses = 3;
+
 /// What SmoothNoisyPositions found and did.
 struct NoiseSmoothing {
   double noise = 0;       ///< the position noise (RMS, units of the positions): the residual's part that
@@ -122,6 +127,7 @@ struct NoiseSmoothing {
   double residual = 0;    ///< median RMS height residual of the samples' 16-sample quadric fits, same units
   std::size_t moved = 0;  ///< samples moved (0 when the noise was below the threshold)
   double mean_move = 0;   ///< mean |move| over the moved samples, all passes, units of the positions
+  int passes = 0;         ///< move passes run (0 when the noise was below the threshold)
   bool Applied() const { return moved > 0; }
 };
 
@@ -135,7 +141,7 @@ struct NoiseSmoothing {
 /// sparse ones included, stay far below), every sample moves along its normal, in `passes` Jacobi
 /// passes, by half the mean over its nearest samples j with n_j . n_i >= 0.5 (at least 2) of
 ///   t_ij = (n_i + n_j) . (P_j - P_i) / (1 + n_i . n_j),
-/// capped at 2.5 x the 16-sample residual; the nearest 16, 32 or 64, the largest whose mean's
+/// capped at 2.5 x the 16-sample residual; the nearest 16, 32 or 64 (kMove*Neighbours), the largest whose mean's
 /// interval (+- 1.25 x the residual / sqrt(count)) meets the smaller ones' (LPA-ICI: a larger
 /// neighbourhood averages more noise until the surface turns within it). On a smooth surface the chord between two
 /// samples is perpendicular to the sum of their normals to second order at any curvature (exactly on a sphere), so t_ij
@@ -149,6 +155,6 @@ struct NoiseSmoothing {
 /// samples or `neighbours` < 8: nothing measured or moved. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
-                                    double threshold, int passes = 3);
+                                    double threshold, int passes = kMovePasses);
 
 }  // namespace palpa::field
