@@ -152,12 +152,34 @@ TEST_F(Cli, BarePositionsAreEstimatedAndFlippedNormalsAreReoriented) {
   const std::string bare_in = Write("bare.xyz", bare);
   const Outcome b = Palpa("build " + bare_in + " -o " + Path("bare.palpa") + " --cells 48");
   ASSERT_EQ(b.code, 0) << b.out;
-  EXPECT_NE(b.out.find("926 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece (1 "
-                       "closed, 0 open) (the "
-                       "file has no normals)"),
+  EXPECT_NE(b.out.find("926 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece "
+                       "(1 closed, 0 open) (the file has no normals)"),
             std::string::npos)
       << b.out;
   EXPECT_EQ(b.out.find("not consistently oriented"), std::string::npos) << b.out;
+  // Every normal 0 0 0 (what tools write where they have none): the same build as bare positions,
+  // not a refusal for 926 degenerate normals; --strict still refuses it.
+  std::string zeros;
+  std::istringstream bare_lines(bare);
+  for (std::string line; std::getline(bare_lines, line);) zeros += line + " 0 0 0\n";
+  const std::string zeros_in = Write("zeros.xyz", zeros);
+  const Outcome z = Palpa("build " + zeros_in + " -o " + Path("zeros.palpa") + " --cells 48");
+  ASSERT_EQ(z.code, 0) << z.out;
+  EXPECT_NE(z.out.find("926 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece "
+                       "(1 closed, 0 open) (every normal in the file is zero or not finite)"),
+            std::string::npos)
+      << z.out;
+  ASSERT_EQ(Palpa("export " + Path("bare.palpa") + " --npy " + Path("bare.npy")).code, 0);
+  ASSERT_EQ(Palpa("export " + Path("zeros.palpa") + " --npy " + Path("zeros.npy")).code, 0);
+  const auto bytes = [](const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  EXPECT_EQ(bytes(Path("bare.npy")), bytes(Path("zeros.npy")));
+  const Outcome zs = Palpa("build " + zeros_in + " -o " + Path("zeros_strict.palpa") + " --cells 48 --strict");
+  EXPECT_EQ(zs.code, 2) << zs.out;
+  EXPECT_NE(zs.out.find("--strict: 926 samples with a zero-length or non-finite normal"), std::string::npos) << zs.out;
+  EXPECT_FALSE(fs::exists(Path("zeros_strict.palpa")));
 
   const std::string inward_in = Write("inward.xyz", inward);
   const Outcome keep = Palpa("build " + inward_in + " -o " + Path("keep.palpa") + " --cells 48 -q");

@@ -103,6 +103,16 @@ int RunBuild(const BuildArgs& args) {
     return kExitBadInput;
   }
   const std::size_t read_count = points->positions.size();
+  // A file whose every normal is zero or not finite has none (CGAL and other tools write 0 0 0
+  // where they have no normal): estimated, as a file of bare positions, not refused as
+  // degenerate. --strict still refuses it below.
+  bool all_normals_degenerate = false;
+  if (points->has_normals && !args.strict && read_count > 0) {
+    all_normals_degenerate = std::none_of(points->normals.begin(), points->normals.end(), [](const Eigen::Vector3d& v) {
+      return v.allFinite() && v.squaredNorm() > 0.0;
+    });
+    if (all_normals_degenerate) points->has_normals = false;
+  }
   // Dropping degenerate samples or thinning below moves the middle 99.8 % of a set little: one
   // provisional voxel serves both thinnings.
   const double provisional_voxel = ProvisionalVoxel(*points, args);
@@ -148,7 +158,9 @@ int RunBuild(const BuildArgs& args) {
     if (normals_mode == field::NormalsMode::kEstimate) field::RefineNormalLines(points->positions, points->normals);
     if (!args.quiet || !points->has_normals)
       fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
-                 points->has_normals ? "" : " (the file has no normals)");
+                 points->has_normals      ? ""
+                 : all_normals_degenerate ? " (every normal in the file is zero or not finite)"
+                                          : " (the file has no normals)");
   }
   // A dense scan is thinned before the neighbour searches below (on 2,000,000 samples they cost
   // more than the build): to half the voxel the fit will give, from the bounding box of the
