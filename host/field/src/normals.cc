@@ -1,8 +1,10 @@
 #include "palpa/field/normals.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <numbers>
 #include <numeric>
 #include <vector>
 
@@ -82,10 +84,33 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
       relative[s] = eighth > 0 ? std::max(residual, 0.0) / eighth : 0.0;
     }
   });
-  const double noise = detail::Median(std::move(relative));
-  if (noise < kCleanNoise) return kCleanNormalNeighbours;
-  detail::JetNormalLines(positions, kNormalNeighbours, normals);
-  return kNormalNeighbours;
+  if (detail::Median(std::move(relative)) < kCleanNoise) return kCleanNormalNeighbours;
+  // Noisy: 18 neighbours; where the lines of nearest neighbours still differ by more than
+  // kRoughNormalsDeg on the median (noise, not curvature, at that spacing), more, until they
+  // differ by kSmoothNormalsDeg at most.
+  const auto rough_deg = [&] {
+    std::vector<double> angle(count);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& r) {
+      std::array<std::size_t, 2> idx{};
+      std::array<double, 2> d2{};
+      for (std::size_t s = r.begin(); s != r.end(); ++s) {
+        const std::size_t i = s * stride;
+        const std::size_t got = tree.knnSearch(positions[i].data(), 2, idx.data(), d2.data());
+        const std::size_t j = got > 1 && idx[0] == i ? idx[1] : idx[0];
+        angle[s] = std::acos(std::min(1.0, std::abs(normals[i].dot(normals[j])))) * 180.0 / std::numbers::pi;
+      }
+    });
+    return detail::Median(std::move(angle));
+  };
+  int neighbours = kNormalNeighbours;
+  detail::JetNormalLines(positions, neighbours, normals);
+  if (rough_deg() <= kRoughNormalsDeg) return neighbours;
+  while (neighbours < kMostNormalNeighbours && static_cast<std::size_t>(neighbours) < n - 1) {
+    neighbours = std::min(kMostNormalNeighbours, neighbours * 3 / 2);
+    detail::JetNormalLines(positions, neighbours, normals);
+    if (rough_deg() <= kSmoothNormalsDeg) break;
+  }
+  return neighbours;
 }
 
 void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
@@ -190,7 +215,9 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
 std::string NormalsReport::Describe() const {
   std::string what =
       estimated > 0 ? fmt::format("{} normals estimated (jet fit, {} neighbours{}) and oriented", estimated, neighbours,
-                                  neighbours == kCleanNormalNeighbours ? ": the samples are clean" : "")
+                                  neighbours == kCleanNormalNeighbours ? ": the samples are clean"
+                                  : neighbours > kNormalNeighbours     ? ": the samples are very noisy"
+                                                                       : "")
                     : fmt::format("normals oriented, {} sign{} changed", flipped, flipped == 1 ? "" : "s");
   return fmt::format("{}: {} piece{} ({} closed, {} open)", what, components, components == 1 ? "" : "s",
                      components - open_components, open_components);
