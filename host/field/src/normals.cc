@@ -104,11 +104,23 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
   };
   int neighbours = kNormalNeighbours;
   detail::JetNormalLines(positions, neighbours, normals);
-  if (rough_deg() <= kRoughNormalsDeg) return neighbours;
-  while (neighbours < kMostNormalNeighbours && static_cast<std::size_t>(neighbours) < n - 1) {
-    neighbours = std::min(kMostNormalNeighbours, neighbours * 3 / 2);
-    detail::JetNormalLines(positions, neighbours, normals);
-    if (rough_deg() <= kSmoothNormalsDeg) break;
+  double rough = rough_deg();
+  if (rough <= kRoughNormalsDeg) return neighbours;
+  std::vector<V3> wider;
+  while (rough > kSmoothNormalsDeg && neighbours < kMostNormalNeighbours &&
+         static_cast<std::size_t>(neighbours) < n - 1) {
+    const int more = std::min(kMostNormalNeighbours, neighbours * 3 / 2);
+    detail::JetNormalLines(positions, more, wider);
+    std::swap(wider, normals);
+    const double wider_rough = rough_deg();
+    // Noise falls as 1 / (radius x sqrt(count)), by a third per step; a smaller fall is the
+    // surface's own curvature, which a wider fit blurs.
+    if (wider_rough > kNoiseFall * rough) {
+      std::swap(wider, normals);
+      break;
+    }
+    neighbours = more;
+    rough = wider_rough;
   }
   return neighbours;
 }

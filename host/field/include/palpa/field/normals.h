@@ -64,6 +64,10 @@ inline constexpr double kCleanNoise = 0.075;
 /// (noise 1.6 sample spacings), 10.2 / 5.9 / 3.5 there with 40 / 60 / 90.
 inline constexpr double kRoughNormalsDeg = 15.0;
 inline constexpr double kSmoothNormalsDeg = 5.0;
+/// ... and each wider fit is kept only while it lowers that median to this fraction or less (noise:
+/// 0.58-0.64 per step on sphere_20k; CGAL's blobby.xyz, a noisy scan of a curved shape, 0.78,
+/// and stays at 18 neighbours).
+inline constexpr double kNoiseFall = 0.7;
 inline constexpr int kMostNormalNeighbours = 96;
 
 /// Replaces `normals` (resized to positions.size()) by unit normal lines from a degree-2 jet fit
