@@ -126,14 +126,25 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode == field::NormalsMode::kEstimate) {
     // A dense scan is thinned by position first: the jet fit, the orientation and the edge
     // refinement over 2,000,000 points took a minute, for samples the thinning below merges anyway.
-    if (const double cell = provisional_voxel / 2; cell > 0) {
+    // A noisy dense scan spreads over a shell too thick for half-voxel cells to halve it, and its
+    // jet fits then follow the noise (knot1, 2,000,000 samples with 1 voxel of noise: 48 % of
+    // the band wrong): then cells of the grid's own kDenseCellVoxels, whose averages also
+    // shrink the noise.
+    if (provisional_voxel > 0) {
       const std::size_t before = points->positions.size();
       points->normals.assign(before, Eigen::Vector3d::UnitZ());  // one group per cell: by position only
-      if (field::SimplifyDenseSamples(*points, cell).Applied() && !args.quiet)
+      double voxels = 0.5;
+      bool thinned = field::SimplifyDenseSamples(*points, voxels * provisional_voxel).Applied();
+      if (!thinned) {
+        voxels = kDenseCellVoxels;
+        thinned = field::SimplifyDenseSamples(*points, voxels * provisional_voxel).Applied();
+      }
+      if (thinned && !args.quiet)
         fmt::print(stderr,
-                   "palpa build: note: {}: {} samples thinned to {} (half a voxel, by position) before their normals "
+                   "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position) before their normals "
                    "were estimated\n",
-                   args.points, before, points->positions.size());
+                   args.points, before, points->positions.size(),
+                   voxels == 0.5 ? "half a" : fmt::format("{:g}", voxels), voxels == 0.5 ? "" : "s");
     }
     normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
     normals_report.estimated = points->positions.size();
