@@ -167,6 +167,33 @@ TEST(Normals, VeryNoisySamplesWidenTheFit) {
   EXPECT_LT(angle[angle.size() / 2], 8.0) << neighbours << " neighbours";
 }
 
+TEST(Normals, RimSamplesOfAnOpenScanKeepTheirJetFit) {
+  // A unit dome (z > 0.3), random samples: at its rim every plane through a sample extrapolates
+  // from one side and tilts; the jet fit's quadric does not. Measured on the rim's samples (z <
+  // 0.33), median angle to the radial line: 1.7 degrees refined there, 0.0 kept.
+  std::mt19937 random(2);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::vector<V3> positions;
+  while (positions.size() < 4200) {
+    const V3 u = V3(gauss(random), gauss(random), gauss(random)).normalized();
+    if (u.z() > 0.3) positions.push_back(u);
+  }
+  std::vector<V3> normals;
+  EstimateNormalLines(positions, normals);
+  NormalsReport report;
+  OrientNormals(positions, normals, false, report, true);
+  RefineNormalLines(positions, normals);
+  std::vector<double> rim;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    EXPECT_GT(normals[i].dot(positions[i]), 0.0) << i;
+    if (positions[i].z() < 0.33)
+      rim.push_back(std::acos(std::min(1.0, normals[i].dot(positions[i]))) * 180.0 / std::numbers::pi);
+  }
+  ASSERT_GT(rim.size(), 100u);
+  std::nth_element(rim.begin(), rim.begin() + static_cast<std::ptrdiff_t>(rim.size() / 2), rim.end());
+  EXPECT_LT(rim[rim.size() / 2], 0.5);
+}
+
 TEST(Normals, EstimatedAndOrientedSphereIsOutward) {
   const Oriented s = Sphere(3000, 2.5, V3(10, -4, 7));  // off the origin: the sign may not assume it
   std::vector<V3> normals;
@@ -296,6 +323,7 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearEdgesOfRandomSamples) {
   for (std::size_t shape = 0; shape < shapes.size(); ++shape) {
     Oriented set;
     std::vector<double> from_edge;  // distance to the face's nearest edge with another face
+    std::vector<double> from_rim;   // the ridge's: distance to the sheet's open boundary
     for (const Face& f : shapes[shape]) {
       for (int i = 0; i < 500; ++i) {
         const double s = unit(random);
@@ -303,6 +331,7 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearEdgesOfRandomSamples) {
         set.positions.push_back(f.origin + s * f.u + t * f.v);
         set.normals.push_back(f.normal);
         from_edge.push_back(shape == 0 ? 2.0 * std::min({s, 1 - s, t, 1 - t}) : 2.0 * s);
+        from_rim.push_back(shape == 0 ? 2.0 : 2.0 * std::min({1 - s, t, 1 - t}));
       }
     }
     const double spacing =
@@ -315,13 +344,15 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearEdgesOfRandomSamples) {
     std::size_t considered = 0;
     std::size_t off = 0;
     for (std::size_t i = 0; i < normals.size(); ++i) {
-      if (from_edge[i] < 0.25 * spacing) continue;
+      // Rim samples keep their jet fit (RefineNormalLines): where the ridge meets the sheet's
+      // open boundary it blends the slopes (1 sample of the ridge's 990 before this was excluded).
+      if (from_edge[i] < 0.25 * spacing || from_rim[i] < spacing) continue;
       ++considered;
       off += normals[i].dot(set.normals[i]) < std::cos(20.0 * std::numbers::pi / 180) ? 1u : 0u;
     }
     EXPECT_EQ(CountAgainst(normals, set.normals), 0u) << shape;
-    // Measured: 3 of 2,867 (cube) and 1 of 990 (ridge); with the plane chosen by the wide support
-    // (kSelectWidth 1, kSelectNoise 0, triples of the 8 nearest), 37 and 4.
+    // Measured: 4 of 2,867 (cube; 3 with the 18-neighbour jet fit) and 1 of 865 (ridge); with the plane chosen by the
+    // wide support (kSelectWidth 1, kSelectNoise 0, triples of the 8 nearest), 37 and 4.
     EXPECT_LE(off, considered / 500) << shape << ": " << off << " of " << considered;
   }
 }
