@@ -166,7 +166,7 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode != field::NormalsMode::kKeep) {
     field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
                          normals_report, normals_mode == field::NormalsMode::kEstimate);
-    if (normals_mode == field::NormalsMode::kEstimate && !std::getenv("PALPA_NOREF")) field::RefineNormalLines(points->positions, points->normals);
+    if (normals_mode == field::NormalsMode::kEstimate) field::RefineNormalLines(points->positions, points->normals);
     if (!args.quiet || !points->has_normals)
       fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
                  points->has_normals      ? ""
