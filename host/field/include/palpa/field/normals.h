@@ -4,9 +4,9 @@
 // need outward unit normals first. Host only, non-RT.
 //
 //  estimate: the normal line of each sample from a jet fit (CGAL::jet_estimate_normals, Cazals &
-//            Pouget 2003: a degree-2 height function fitted to the 18 nearest samples, or to the
-//            10 nearest when the samples are clean), then oriented as below, then sharpened at
-//            edges (RefineNormalLines).
+//            Pouget 2003: a degree-2 height function fitted to the 10 nearest samples when they
+//            are clean, to the 18 nearest when noisy, up to 96 when the noise exceeds their
+//            spacing), then oriented as below, then sharpened at edges (RefineNormalLines).
 //  orient:   keeps each normal's line and chooses its sign as below.
 // Orientation: Hoppe et al. 1992 ("Surface reconstruction from unorganized points", §3.3): a
 // minimum spanning tree of the k-nearest-neighbour graph with edge cost 1 - |n_i . n_j| carries one
@@ -44,7 +44,8 @@ struct NormalsReport {
   std::size_t components = 0;       ///< connected pieces of the neighbour graph
   std::size_t open_components = 0;  ///< of which open (sign from the majority or the divergence sum)
   int neighbours = 0;               ///< of the jet fit (EstimateNormalLines' result), when estimated
-  /// "5,210 normals estimated (jet fit, 18 neighbours) and oriented: 1 piece (closed)"
+  /// "5210 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece
+  /// (1 closed, 0 open)"
   std::string Describe() const;
 };
 
@@ -52,10 +53,11 @@ struct NormalsReport {
 inline constexpr int kNormalNeighbours = 18;
 inline constexpr int kCleanNormalNeighbours = 10;
 inline constexpr int kOrientNeighbours = 12;
-/// Samples are clean when the median over them of (RMS residual of a quadric fitted to the 16
-/// nearest along the 18-neighbour jet normal) / (distance to the 8th nearest) is below this:
-/// 0.011-0.056 on exact samples of 13 meshes, 0.05-0.10 at 0.25 voxel of position noise (150
-/// cells), 0.093-0.19 at 0.5 voxel.
+/// Samples are clean when the median over them (at most 20,000) of (RMS residual of a quadric
+/// fitted to the 10 nearest along their 10-neighbour jet normal) / (distance to the 8th nearest)
+/// is below this: 0.004-0.033 on exact samples of 13 meshes, 0.007 and 0.045 on the real kitten
+/// and oni scans, 0.046-0.096 at 0.25 voxel of position noise (5,000 samples, 150 cells),
+/// 0.090-0.18 at 0.5 voxel, 0.17-0.29 at 1 voxel.
 inline constexpr double kCleanNoise = 0.075;
 /// A noisy set whose 18-neighbour lines of nearest neighbours differ by more than kRoughNormalsDeg
 /// on the median is fitted again over 1.5x as many (up to kMostNormalNeighbours) until they
@@ -74,8 +76,8 @@ inline constexpr int kMostNormalNeighbours = 96;
 /// (CGAL::jet_estimate_normals); signs arbitrary until OrientNormals. Fits the
 /// kCleanNormalNeighbours nearest samples and keeps them where the set is clean (kCleanNoise);
 /// else fits the kNormalNeighbours nearest, and more while the lines are rough
-/// (kRoughNormalsDeg; CGAL's sphere_20k, without normals: band mean 0.612 -> 0.43 voxel, 1,385
-/// far-wrong nodes -> 0). 18 average the noise of a scan, but on clean samples span both
+/// (kRoughNormalsDeg; CGAL's sphere_20k, without normals: 90 neighbours, band mean 0.612 -> 0.353
+/// voxel, 1,385 far-wrong nodes -> 0). 18 average the noise of a scan, but on clean samples span both
 /// sides of parts a few spacings thick and blend the facets of low-polygon meshes (10 CGAL meshes
 /// never tuned on, exact samples, normals stripped: wrong sign in the band 1.18-5.54x that with
 /// exact normals with 18, 1.18-2.27x with 10; bench/field/robustness.py --seed 2). Returns the
@@ -93,7 +95,10 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// 20 x 20 per face: exact from the second row off each edge; fandisk, 5,000 samples: wrong sign
 /// in the band 1.27 % (jet) -> 0.82 % (width w) -> 0.49 %, exact normals 0.36 %). Where the noise
 /// (one figure for the set: the median offset of neighbours from the smooth planes / 0.674) is
-/// over w/2, the sample keeps its jet normal, the better average there. Run after OrientNormals:
+/// over w/2, the sample keeps its jet normal, the better average there; so does a sample on a rim
+/// (its neighbours leave an angular gap over 150 degrees in its tangent plane: every plane through
+/// it extrapolates from one side and tilts, and an open side's closure magnifies the tilt; range
+/// scans without normals: far-wrong nodes 3,248 -> 0 on the sphere). Run after OrientNormals:
 /// the tree crosses edges reliably only on smooth normals. Parallel, deterministic.
 void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals);
 
