@@ -89,7 +89,8 @@ double WidestGap(const std::vector<V3>& positions, const std::size_t* idx, std::
 int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
   detail::JetNormalLines(positions, kCleanNormalNeighbours, normals);
   const std::size_t n = positions.size();
-  if (n <= static_cast<std::size_t>(kCleanNormalNeighbours)) return kCleanNormalNeighbours;
+  // Too few to measure the noise: the fit took them all (n - 1 neighbours).
+  if (n <= static_cast<std::size_t>(kCleanNormalNeighbours)) return n > 0 ? static_cast<int>(n - 1) : 0;
   // The noise relative to the spacing, over the same 10 nearest (wider, the fit of a sample on a
   // thin part would count the part's other side as noise), on at most 20,000 samples.
   const std::size_t stride = (n + 19'999) / 20'000;
