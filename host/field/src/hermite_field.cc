@@ -55,11 +55,10 @@ constexpr std::size_t kClosingBalls = 16;
 // Beside a rim (RimSamples) the inner balls close down to this w.
 constexpr double kRimClosingWinding = 0.1;
 constexpr std::size_t kRimNeighbours = 16;
-// RimSamples: the widest angular gap between a sample's neighbours on its tangent plane, and w
-// probed kRimProbeSpacings neighbour distances past the sample across that gap. An open sphere's
-// rim probes 0.17-0.21, the edges and tips of closed thin parts (CGAL's bull: ears, horns) 0.05
-// or less for 8 in 10.
-constexpr double kRimGap = 150.0 * std::numbers::pi / 180.0;
+// RimSamples: the widest angular gap between a sample's neighbours on its tangent plane (over
+// detail::kRimGap), and w probed kRimProbeSpacings neighbour distances past the sample across that
+// gap. An open sphere's rim probes 0.17-0.21, the edges and tips of closed thin parts (CGAL's bull:
+// ears, horns) 0.05 or less for 8 in 10.
 constexpr double kRimProbeSpacings = 2.0;
 constexpr double kRimProbeWinding = 0.1;
 constexpr double kOpenFaceWinding = 0.1;
@@ -704,30 +703,14 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
     std::array<std::size_t, kRimNeighbours + 1> idx{};
     std::array<double, kRimNeighbours + 1> d2{};
-    std::array<double, kRimNeighbours + 1> angle{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const V3& n = normals[i];
       const V3 u = n.unitOrthogonal();
       const V3 v = n.cross(u);
       const std::size_t got = tree.knnSearch(positions[i].data(), kRimNeighbours + 1, idx.data(), d2.data());
-      std::size_t m = 0;
-      for (std::size_t q = 0; q < got; ++q) {
-        if (idx[q] == i) continue;
-        const V3 d = positions[idx[q]] - positions[i];
-        const double x = d.dot(u), y = d.dot(v);
-        if (x * x + y * y > 0.0) angle[m++] = std::atan2(y, x);
-      }
-      if (m < 3) continue;
-      std::sort(angle.begin(), angle.begin() + static_cast<std::ptrdiff_t>(m));
-      double gap = angle[0] + 2.0 * std::numbers::pi - angle[m - 1];
-      double mid = angle[m - 1] + 0.5 * gap;
-      for (std::size_t q = 1; q < m; ++q)
-        if (angle[q] - angle[q - 1] > gap) {
-          gap = angle[q] - angle[q - 1];
-          mid = angle[q - 1] + 0.5 * gap;
-        }
-      if (gap <= kRimGap) continue;
-      const V3 across = std::cos(mid) * u + std::sin(mid) * v;
+      const detail::TangentGap widest = detail::WidestTangentGap<kRimNeighbours + 1>(positions, idx.data(), got, i, n);
+      if (widest.count < 3 || widest.gap <= detail::kRimGap) continue;
+      const V3 across = std::cos(widest.mid) * u + std::sin(widest.mid) * v;
       const V3 beyond = positions[i] + kRimProbeSpacings * std::sqrt(d2[got - 1]) * across;
       rim[i] = winding(beyond) >= kRimProbeWinding ? 1 : 0;
     }

@@ -34,11 +34,6 @@ constexpr double kSelectNoise = 2.0;
 // Triples of P_i and two of its kTripleNeighbours nearest: a face met by only a thin row of
 // samples near P_i still has a non-collinear pair among them (9 -> 13: fandisk 0.52 -> 0.49 %).
 constexpr std::size_t kTripleNeighbours = 12;
-// A sample whose neighbours leave an angular gap wider than this around it, in its tangent plane,
-// lies on a rim (an open scan's edge, a hole's): the planes through it extrapolate there and tilt
-// (a dome's rim: 1.7 degrees on the median against the jet fit's 0.0), and an open side's closure
-// magnifies the tilt by the part's radius. As RimSamples' gap in hermite_field.cc.
-constexpr double kRimGap = 150.0 * std::numbers::pi / 180.0;
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -62,27 +57,6 @@ struct UnionFind {
     return true;
   }
 };
-
-// The widest angle between consecutive neighbours of P_i (idx, excluding i) projected on the
-// plane through P_i normal to `normal`; 2 pi with fewer than two.
-double WidestGap(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, std::size_t i,
-                 const V3& normal) {
-  const V3 axis = std::abs(normal.x()) < 0.9 ? V3::UnitX() : V3::UnitY();
-  const V3 t1 = axis.cross(normal).normalized();
-  const V3 t2 = normal.cross(t1);
-  std::array<double, kRefineNeighbours + 1> angle{};
-  std::size_t n = 0;
-  for (std::size_t m = 0; m < count && n < angle.size(); ++m) {
-    if (idx[m] == i) continue;
-    const V3 d = positions[idx[m]] - positions[i];
-    angle[n++] = std::atan2(d.dot(t2), d.dot(t1));
-  }
-  if (n < 2) return 2.0 * std::numbers::pi;
-  std::sort(angle.begin(), angle.begin() + static_cast<std::ptrdiff_t>(n));
-  double widest = angle[0] + 2.0 * std::numbers::pi - angle[n - 1];
-  for (std::size_t m = 1; m < n; ++m) widest = std::max(widest, angle[m] - angle[m - 1]);
-  return widest;
-}
 
 }  // namespace
 
@@ -192,7 +166,13 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       // is larger than that, the jet fit's average is the better normal: kept.
       const double width = kRefineWidth * std::sqrt(d2[got - 1]);
       if (2.0 * sigma > width) continue;
-      if (WidestGap(positions, idx.data(), got, i, start[i]) > kRimGap) continue;
+      // A rim sample (detail::kRimGap) keeps its jet fit: the planes through it extrapolate from
+      // one side and tilt (a dome's rim: 1.7 degrees on the median against the jet fit's 0.0),
+      // and an open side's closure magnifies the tilt by the part's radius.
+      if (const detail::TangentGap widest =
+              detail::WidestTangentGap<kRefineNeighbours + 1>(positions, idx.data(), got, i, start[i]);
+          widest.count < 2 || widest.gap > detail::kRimGap)
+        continue;
       const auto support = [&](const V3& normal, std::size_t m) {
         const double t = normal.dot(positions[idx[m]] - positions[i]) / width;
         return std::exp(-t * t);

@@ -6,9 +6,12 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <numbers>
 #include <vector>
 
 #include <nanoflann.hpp>
@@ -36,6 +39,48 @@ using KdTree =
 // (kitten, 300 cells, one thread: 69 -> 59 ms and 71 -> 65 ms). The k-nearest searches keep 10:
 // a tie at the kth distance goes to the sample visited first, so their results follow the tree.
 inline constexpr std::size_t kRangeLeaf = 24;
+
+// A sample on a rim (an open scan's edge, a hole's): its nearest samples leave an angular gap
+// wider than this around it in its tangent plane; on a surface it is ~23 degrees for 16 random
+// neighbours (RimSamples in hermite_field.cc, RefineNormalLines in normals.cc).
+inline constexpr double kRimGap = 150.0 * std::numbers::pi / 180.0;
+
+// The widest angle between consecutive neighbours of P_i (idx[0, count), i itself and any
+// neighbour on the line through P_i along `normal` skipped) projected on the plane through P_i
+// normal to `normal`, the direction (angle) across its middle in the frame u =
+// normal.unitOrthogonal(), v = normal x u, and how many neighbours were projected. At most
+// `Capacity` neighbours are used.
+struct TangentGap {
+  double gap = 0.0;
+  double mid = 0.0;
+  std::size_t count = 0;
+};
+template <std::size_t Capacity>
+TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx, std::size_t count,
+                            std::size_t i, const Eigen::Vector3d& normal) {
+  const Eigen::Vector3d u = normal.unitOrthogonal();
+  const Eigen::Vector3d v = normal.cross(u);
+  std::array<double, Capacity> angle{};
+  std::size_t m = 0;
+  for (std::size_t q = 0; q < count && m < Capacity; ++q) {
+    if (idx[q] == i) continue;
+    const Eigen::Vector3d d = positions[idx[q]] - positions[i];
+    const double x = d.dot(u), y = d.dot(v);
+    if (x * x + y * y > 0.0) angle[m++] = std::atan2(y, x);
+  }
+  TangentGap out;
+  out.count = m;
+  if (m == 0) return out;
+  std::sort(angle.begin(), angle.begin() + static_cast<std::ptrdiff_t>(m));
+  out.gap = angle[0] + 2.0 * std::numbers::pi - angle[m - 1];
+  out.mid = angle[m - 1] + 0.5 * out.gap;
+  for (std::size_t q = 1; q < m; ++q)
+    if (angle[q] - angle[q - 1] > out.gap) {
+      out.gap = angle[q] - angle[q - 1];
+      out.mid = angle[q - 1] + 0.5 * out.gap;
+    }
+  return out;
+}
 
 // Unit normal lines from CGAL::jet_estimate_normals over the `neighbours` nearest samples (signs
 // arbitrary); (0, 0, 1) where the fit fails, and for fewer than 4 positions. normals_cgal.cc.
