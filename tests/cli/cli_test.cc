@@ -29,6 +29,12 @@ Outcome Palpa(const std::string& args) { return palpa::test_support::Run(std::st
 
 using Cli = palpa::test_support::TempDirTest;
 
+// The whole file at `path`, bytes as stored ("" when it cannot be read).
+std::string ReadBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
 // Shortest text that reads back as the same double.
 std::string fmt(double x) {
   char buf[32];
@@ -111,11 +117,7 @@ TEST_F(Cli, DegenerateSamplesAreDroppedAndNamed) {
       << b.out;
   ASSERT_EQ(Palpa("export " + Path("clean.palpa") + " --npy " + Path("clean.npy")).code, 0);
   ASSERT_EQ(Palpa("export " + Path("dirty.palpa") + " --npy " + Path("dirty.npy")).code, 0);
-  const auto read = [](const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-  };
-  EXPECT_EQ(read(Path("clean.npy")), read(Path("dirty.npy")));
+  EXPECT_EQ(ReadBytes(Path("clean.npy")), ReadBytes(Path("dirty.npy")));
   const Outcome info = Palpa("info --json " + Path("dirty.palpa"));
   EXPECT_NE(info.out.find("\"point_count\": 926"), std::string::npos) << info.out;
 
@@ -171,11 +173,7 @@ TEST_F(Cli, BarePositionsAreEstimatedAndFlippedNormalsAreReoriented) {
       << z.out;
   ASSERT_EQ(Palpa("export " + Path("bare.palpa") + " --npy " + Path("bare.npy")).code, 0);
   ASSERT_EQ(Palpa("export " + Path("zeros.palpa") + " --npy " + Path("zeros.npy")).code, 0);
-  const auto bytes = [](const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-  };
-  EXPECT_EQ(bytes(Path("bare.npy")), bytes(Path("zeros.npy")));
+  EXPECT_EQ(ReadBytes(Path("bare.npy")), ReadBytes(Path("zeros.npy")));
   const Outcome zs = Palpa("build " + zeros_in + " -o " + Path("zeros_strict.palpa") + " --cells 48 --strict");
   EXPECT_EQ(zs.code, 2) << zs.out;
   EXPECT_NE(zs.out.find("--strict: 926 samples with a zero-length or non-finite normal"), std::string::npos) << zs.out;
@@ -192,11 +190,7 @@ TEST_F(Cli, BarePositionsAreEstimatedAndFlippedNormalsAreReoriented) {
   ASSERT_EQ(Palpa("build " + outward_in + " -o " + Path("outward.palpa") + " --cells 48 -q").code, 0);
   ASSERT_EQ(Palpa("export " + Path("orient.palpa") + " --npy " + Path("orient.npy")).code, 0);
   ASSERT_EQ(Palpa("export " + Path("outward.palpa") + " --npy " + Path("outward.npy")).code, 0);
-  const auto read = [](const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-  };
-  EXPECT_EQ(read(Path("orient.npy")), read(Path("outward.npy")));
+  EXPECT_EQ(ReadBytes(Path("orient.npy")), ReadBytes(Path("outward.npy")));
   const Outcome bad = Palpa("build " + outward_in + " -o " + Path("x.palpa") + " --normals guess");
   EXPECT_NE(bad.code, 0);
   EXPECT_FALSE(fs::exists(Path("x.palpa")));
@@ -314,10 +308,6 @@ TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
   const std::string stray_in = Write("stray.xyz", clean + "13 0 0 1 0 0\n");
   const std::string far_in = Write("far.xyz", clean + "1e30 1e30 1e30 0 0 1\n");
   const std::string clean_in = Write("clean.xyz", clean);
-  const auto read = [](const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-  };
   ASSERT_EQ(Palpa("build " + clean_in + " -o " + Path("clean.palpa") + " --cells 48 -q").code, 0);
   ASSERT_EQ(Palpa("export " + Path("clean.palpa") + " --npy " + Path("clean.npy")).code, 0);
   for (const std::string& input : {stray_in, far_in}) {
@@ -329,7 +319,7 @@ TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
               std::string::npos)
         << b.out;
     ASSERT_EQ(Palpa("export " + Path("x.palpa") + " --npy " + Path("x.npy")).code, 0);
-    EXPECT_EQ(read(Path("x.npy")), read(Path("clean.npy"))) << input;
+    EXPECT_EQ(ReadBytes(Path("x.npy")), ReadBytes(Path("clean.npy"))) << input;
   }
   // The clean file has none.
   const Outcome c = Palpa("build " + clean_in + " -o " + Path("c.palpa") + " --cells 48 -q");
