@@ -464,6 +464,35 @@ TEST(SimplifyDenseSamples, ADenseSphereKeepsOneSamplePerCellOnTheSurface) {
   }
 }
 
+// A bare scan is thinned by position before its normals are estimated: half-voxel cells where
+// they halve the count, else cells of kDenseCellVoxels (a noisy shell thicker than the cells).
+TEST(SimplifyBarePositions, HalfVoxelCellsOrWiderOnesThroughAThickShell) {
+  PointSet flat;  // 50 x 50 samples 0.1 apart on z = 0: 25 in each half-voxel cell of 0.5
+  for (int a = 0; a < 50; ++a)
+    for (int b = 0; b < 50; ++b) flat.positions.emplace_back(0.1 * a + 0.05, 0.1 * b + 0.05, 0.0);
+  const Simplification thin = SimplifyBarePositions(flat, 1.0);
+  EXPECT_TRUE(thin.Applied());
+  EXPECT_EQ(thin.cell, 0.5);
+  EXPECT_EQ(thin.after, 100u);
+  ASSERT_EQ(flat.normals.size(), flat.positions.size());
+  for (const V3& n : flat.normals) EXPECT_EQ(n, V3::UnitZ());
+
+  // 3,000 random samples in a 10 x 10 x 3 slab: 2,400 half-voxel cells do not halve them, the
+  // cells of 1.5 voxels (7 x 7 x 2 = 98, each holding some) do.
+  PointSet slab;
+  std::mt19937_64 rng(5);
+  const auto uniform = [&] { return static_cast<double>(rng() >> 11) * 0x1p-53; };
+  for (int i = 0; i < 3000; ++i) slab.positions.emplace_back(10.0 * uniform(), 10.0 * uniform(), 3.0 * uniform());
+  const Simplification thick = SimplifyBarePositions(slab, 1.0);
+  EXPECT_TRUE(thick.Applied());
+  EXPECT_EQ(thick.cell, kDenseCellVoxels);
+  EXPECT_LE(thick.after, 98u);
+  EXPECT_GE(thick.after, 90u);
+  EXPECT_EQ(slab.positions.size(), thick.after);
+  ASSERT_EQ(slab.normals.size(), slab.positions.size());
+  for (const V3& n : slab.normals) EXPECT_EQ(n, V3::UnitZ());
+}
+
 TEST(SimplifyDenseSamples, TheTwoSidesOfAThinWallStayApart) {
   PointSet wall;
   for (int i = 0; i < 100; ++i) {

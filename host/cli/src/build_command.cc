@@ -74,10 +74,6 @@ double ProvisionalVoxel(const field::PointSet& points, const BuildArgs& args) {
 
 // As field::BuildField's minimum.
 constexpr std::size_t kMinUsableSamples = 4;
-// A dense scan keeps one sample per cell of this many voxels (and normal side). Knot1, 2,000,000
-// samples at 300 cells: mean |error| 0.013 / 0.016 / 0.024 voxels and wrong sign in the band
-// 0.30 / 0.38 / 0.57 % at 1 / 1.5 / 2 voxels; the packing's time falls with the count.
-constexpr double kDenseCellVoxels = 1.5;
 // --denoise auto (issue 20): the noise measure's wider fit (SmoothNoisyPositions); the samples
 // then move by their kMoveFewestNeighbours-kMoveMostNeighbours nearest (docs/field-methods.md § Noise).
 constexpr std::size_t kDenoiseNeighbours = 48;
@@ -124,22 +120,13 @@ int RunBuild(const BuildArgs& args) {
                                                                        : field::NormalsMode::kKeep;
   field::NormalsReport normals_report;
   if (normals_mode == field::NormalsMode::kEstimate) {
-    // A dense scan is thinned by position first: the jet fit, the orientation and the edge
-    // refinement over 2,000,000 points took a minute, for samples the thinning below merges anyway.
-    // A noisy dense scan spreads over a shell too thick for half-voxel cells to halve it, and its
-    // jet fits then follow the noise (knot1, 2,000,000 samples with 1 voxel of noise: 48 % of
-    // the band wrong): then cells of the grid's own kDenseCellVoxels, whose averages also
-    // shrink the noise.
+    // A dense scan is thinned by position first (SimplifyBarePositions: half a voxel, or 1.5
+    // where a noisy scan's shell is too thick for half-voxel cells to halve it).
     if (provisional_voxel > 0) {
       const std::size_t before = points->positions.size();
-      points->normals.assign(before, Eigen::Vector3d::UnitZ());  // one group per cell: by position only
-      double voxels = 0.5;
-      bool thinned = field::SimplifyDenseSamples(*points, voxels * provisional_voxel).Applied();
-      if (!thinned) {
-        voxels = kDenseCellVoxels;
-        thinned = field::SimplifyDenseSamples(*points, voxels * provisional_voxel).Applied();
-      }
-      if (thinned && !args.quiet)
+      const field::Simplification thinned = field::SimplifyBarePositions(*points, provisional_voxel);
+      const double voxels = thinned.cell / provisional_voxel;
+      if (thinned.Applied() && !args.quiet)
         fmt::print(stderr,
                    "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position) before their normals "
                    "were estimated\n",
@@ -209,13 +196,14 @@ int RunBuild(const BuildArgs& args) {
   // more information at its resolution, and cost the packing minutes: one sample per voxel cell
   // and normal side. A set at or below the grid's resolution is left as it was.
   if (auto grid = field::MakeGrid(device.positions, options.grid)) {
-    const field::Simplification simplified = field::SimplifyDenseSamples(device, grid->voxel_m * kDenseCellVoxels);
+    const field::Simplification simplified =
+        field::SimplifyDenseSamples(device, grid->voxel_m * field::kDenseCellVoxels);
     if (simplified.Applied())
       fmt::print(stderr,
                  "palpa build: note: {}: {} samples are denser than the grid: averaged per cell of {} voxels "
                  "({:.4g} mm) and normal side to {} (denser samples carry no more information at this resolution; "
                  "--cells or --voxel sets it)\n",
-                 args.points, simplified.before, kDenseCellVoxels, simplified.cell * 1e3, simplified.after);
+                 args.points, simplified.before, field::kDenseCellVoxels, simplified.cell * 1e3, simplified.after);
   }
   options.method = args.method == "erosion" ? field::FieldMethod::kErosion
                    : args.method == "edt"   ? field::FieldMethod::kEdt

@@ -249,6 +249,12 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
   return out;
 }
 
+Simplification SimplifyBarePositions(PointSet& points, double voxel) {
+  points.normals.assign(points.positions.size(), Eigen::Vector3d::UnitZ());
+  const Simplification half = SimplifyDenseSamples(points, 0.5 * voxel);
+  return half.Applied() ? half : SimplifyDenseSamples(points, kDenseCellVoxels * voxel);
+}
+
 WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, double min_jump) {
   constexpr double kSureOutlierJump = 0.0;
