@@ -402,6 +402,56 @@ TEST(LeakGuard, SparseFandiskFalseInsideBelowUnguarded) {
   EXPECT_LE(2 * guarded.false_inside, unguarded.false_inside);
 }
 
+// Issue 20: the samples dropped as outliers keep guarding the packing (HermiteOptions::
+// guard_positions). A box 1 x 1 x 4 (a leg), 400 samples; its bottom face's samples are taken
+// out, as a sparse set's lone sole samples are by the winding test. Built without them, the side
+// walls' inner balls reach below the sole plane; with them as guards, no ball reaches more than
+// the guard's tolerance (a quarter voxel) below it, and the guards are no balls themselves.
+TEST(LeakGuard, DroppedSamplesStillBoundTheBalls) {
+  mesh::TriangleMesh leg = UnitCube();
+  for (Eigen::Vector3d& v : leg.vertices) v.z() *= 4.0;
+  auto points = mesh::SampleSurface(leg, 400, 3, "leg");
+  ASSERT_TRUE(points.has_value()) << points.error().message;
+  PointSet kept, sole;
+  for (std::size_t i = 0; i < points->positions.size(); ++i) {
+    PointSet& to = points->normals[i].z() < -0.9 ? sole : kept;
+    to.positions.push_back(points->positions[i]);
+    to.normals.push_back(points->normals[i]);
+  }
+  ASSERT_GE(sole.positions.size(), 10u);  // ~1/18 of the area
+  const Transform fit = FitTransform(*points, 0.06);
+  const PointSet device = ApplyTransform(fit, kept);
+  const PointSet guards = ApplyTransform(fit, sole);
+  const double sole_z = fit.scale * -2.0 + fit.offset_m.z();
+  // Inner balls whose lowest point lies more than `depth` below the sole plane, within the
+  // leg's footprint (beside it a ball may pass the discs).
+  const auto below = [&](bool guarded, double depth) {
+    BuildOptions options;
+    options.grid.cells = 100;
+    if (guarded) {
+      options.guard_positions = guards.positions;
+      options.guard_normals = guards.normals;
+    }
+    auto built = BuildField(device.positions, device.normals, options);
+    EXPECT_TRUE(built.has_value()) << built.error().message;
+    if (!built) return std::size_t{0};
+    EXPECT_EQ(built->packing.radii.size(), device.positions.size());
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < built->packing.radii.size(); ++i) {
+      const Eigen::Vector3d c = (built->packing.centres[i] - fit.offset_m) / fit.scale;
+      if (std::abs(c.x()) > 0.4 || std::abs(c.y()) > 0.4) continue;
+      if (built->packing.centres[i].z() - built->packing.radii[i] < sole_z - depth * built->field.grid().voxel_m)
+        ++count;
+    }
+    return count;
+  };
+  const std::size_t unguarded = below(false, 0.3), guarded = below(true, 0.3);
+  std::printf("[ leg 400 pts, sole dropped ] inner balls > 0.3 voxel below the sole: sole as guards %zu, without %zu\n",
+              guarded, unguarded);
+  EXPECT_GT(unguarded, 5u);
+  EXPECT_EQ(guarded, 0u);
+}
+
 }  // namespace
 }  // namespace palpa::field
 

@@ -218,6 +218,12 @@ int RunBuild(const BuildArgs& args) {
                "(the samples' winding number barely changes across {}); the worst: {}\n",
                args.points, outliers.indices.size(), outliers.indices.size() == 1 ? "" : "s",
                outliers.indices.size() == 1 ? "it" : "them", field::PointPlace(args.points, device, *outliers.worst));
+    // Not built from, but their tangent discs still bound the packed balls: on a sparse set most
+    // are true samples (HermiteOptions::guard_positions).
+    for (const std::size_t i : outliers.indices) {
+      options.guard_positions.push_back(device.positions[i]);
+      options.guard_normals.push_back(device.normals[i]);
+    }
     field::RemoveSamples(device, outliers.indices);
   }
   // Position noise reaches the field whole through each sample's patch and balls: averaged out

@@ -76,6 +76,8 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     HermiteStats& stats = result.hermite;
     HermiteOptions hermite_options;
     hermite_options.leak_guard = options.leak_guard;
+    hermite_options.guard_positions = options.guard_positions;
+    hermite_options.guard_normals = options.guard_normals;
     const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);
     const bool grow = options.grow_for_closure && !result.orientation.OpenScanInconsistent();
     hermite_options.closure_reach_m = grow ? reach.x() : 0.0;

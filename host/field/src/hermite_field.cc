@@ -1142,7 +1142,9 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
                          [&] { st.outer = PackSpheres(positions, flipped, r_max); });
   }
-  if (options.leak_guard && options.packed == nullptr) {
+  const std::size_t guards =
+      options.guard_positions.size() == options.guard_normals.size() ? options.guard_positions.size() : 0;
+  if (options.leak_guard && options.packed == nullptr && guards == 0) {
     tbb::parallel_invoke(
         [&] {
           st.inner_balls_shrunk =
@@ -1152,6 +1154,30 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
           st.outer_balls_shrunk =
               GuardPacking(st.outer, positions, flipped, spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
         });
+  } else if (options.leak_guard && options.packed == nullptr) {
+    // The dropped samples join the guard as balls of radius 0 (nothing to shrink) whose discs
+    // bound the others'; the samples' own disc radii stay their spacing among themselves.
+    std::vector<V3> all = positions;
+    all.insert(all.end(), options.guard_positions.begin(), options.guard_positions.end());
+    std::vector<V3> all_normals = normals;
+    for (const V3& g : options.guard_normals) all_normals.push_back(g.norm() > 0.0 ? V3(g.normalized()) : V3::UnitZ());
+    std::vector<V3> all_flipped(all_normals.size());
+    for (std::size_t i = 0; i < all_normals.size(); ++i) all_flipped[i] = -all_normals[i];
+    std::vector<double> all_spacing = SampleSpacing(all);
+    std::copy(spacing.begin(), spacing.end(), all_spacing.begin());
+    const auto guard = [&](Packing& packing, const std::vector<V3>& ball_normals) {
+      Packing with = std::move(packing);
+      with.centres.insert(with.centres.end(), options.guard_positions.begin(), options.guard_positions.end());
+      with.radii.resize(all.size(), 0.0);
+      const std::size_t shrunk =
+          GuardPacking(with, all, ball_normals, all_spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
+      with.centres.resize(n);
+      with.radii.resize(n);
+      packing = std::move(with);
+      return shrunk;
+    };
+    tbb::parallel_invoke([&] { st.inner_balls_shrunk = guard(st.inner, all_normals); },
+                         [&] { st.outer_balls_shrunk = guard(st.outer, all_flipped); });
   }
   st.seconds_packing = SecondsSince(start);
 

@@ -43,6 +43,10 @@ struct BuildOptions {
   // build does after it denoised noisy samples (issue 20), to average the noise the samples'
   // fits leave. Any method.
   bool smooth_band = false;
+  // kHermite: samples dropped as outliers whose tangent discs still guard the packing
+  // (HermiteOptions::guard_positions), device coordinates; same sizes.
+  std::vector<Eigen::Vector3d> guard_positions;
+  std::vector<Eigen::Vector3d> guard_normals;
 };
 
 struct BuildResult {

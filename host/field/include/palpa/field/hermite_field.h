@@ -68,6 +68,15 @@ struct HermiteOptions {
   // same samples, normals, r_max, leak_guard and voxel, to use instead of packing again: they do not
   // depend on the grid's extent (a grid grown to hold an open scan's closure). nullptr: pack.
   const HermiteStats* packed = nullptr;
+  // Samples dropped as outliers (palpa build: FindWindingOutliers), metres, with their outward
+  // normals (any length > 0): no patch, no balls, no share of the winding number, but each one's
+  // tangent disc still bounds the packed balls as a sample's does (step 3). A sparse set's true
+  // samples are dropped too (the unseen bull with 500 samples: 1-2 %, such as the lone sample on
+  // a hoof's sole), and their neighbours' inner balls then poked out where they stood, making
+  // phantom solid 3-9 voxels deep; an outlier's disc can only shrink balls. Ignored without
+  // leak_guard or with `packed`.
+  std::vector<Eigen::Vector3d> guard_positions;
+  std::vector<Eigen::Vector3d> guard_normals;
 };
 
 struct HermiteStats {
