@@ -819,7 +819,8 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
 // is smooth, never a staircase of brick faces.
 // `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
-                    const KdTree& tree, const std::vector<double>& spacing, double closure_reach_m, HermiteStats& st) {
+                    const std::vector<V3>& guard_positions, const std::vector<V3>& guard_normals, const KdTree& tree,
+                    const std::vector<double>& spacing, double closure_reach_m, HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -995,6 +996,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // For the order-free searches below: any sample within trust, the nearest distance.
   const PointCloud cloud{&positions};
   const KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
+  const PointCloud guard_cloud{&guard_positions};
+  const KdTree guards(3, guard_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
@@ -1054,10 +1057,26 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         float& x = values[node[f]];
         const V3& p = at[f];
         const double w = wn[f];
-        if (std::abs(w - 0.5) <= kWindingClear || (w >= 0.5) == (x <= 0.0f)) continue;
-        if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
+        if ((w >= 0.5) == (x <= 0.0f)) continue;
         std::size_t idx = 0;
         double d2 = 0.0;
+        if (std::abs(w - 0.5) <= kWindingClear) {
+          // w unclear, the estimate inside: a guard (a dropped sample) nearer than every sample
+          // that the node lies in front of, beyond trust, decides outside. Such a guard is, on
+          // a sparse set, the only sample of a part's end (a hoof's sole), whose neighbours'
+          // patches carry the part on past it.
+          if (guard_positions.empty()) continue;
+          std::size_t g = 0;
+          double g2 = 0.0;
+          guards.knnSearch(p.data(), 1, &g, &g2);
+          wide.knnSearch(p.data(), 1, &idx, &d2);
+          const double front = (p - guard_positions[g]).dot(guard_normals[g]);
+          if (!(g2 < d2) || front <= trust) continue;
+          x = std::min(band, static_cast<float>(front / h));
+          ++local;
+          continue;
+        }
+        if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
         wide.knnSearch(p.data(), 1, &idx, &d2);
         const double ds = std::sqrt(d2);
         const float mag = std::min(band, static_cast<float>(ds / h));
@@ -1142,9 +1161,17 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
                          [&] { st.outer = PackSpheres(positions, flipped, r_max); });
   }
-  const std::size_t guards =
-      options.guard_positions.size() == options.guard_normals.size() ? options.guard_positions.size() : 0;
-  if (options.leak_guard && options.packed == nullptr && guards == 0) {
+  // The guards (HermiteOptions::guard_positions) with unit normals; none when the sizes differ.
+  std::vector<V3> guard_positions, guard_normals;
+  if (options.guard_positions.size() == options.guard_normals.size()) {
+    for (std::size_t g = 0; g < options.guard_positions.size(); ++g) {
+      const double length = options.guard_normals[g].norm();
+      if (!(length > 0.0) || !std::isfinite(length) || !options.guard_positions[g].allFinite()) continue;
+      guard_positions.push_back(options.guard_positions[g]);
+      guard_normals.push_back(options.guard_normals[g] / length);
+    }
+  }
+  if (options.leak_guard && options.packed == nullptr && guard_positions.empty()) {
     tbb::parallel_invoke(
         [&] {
           st.inner_balls_shrunk =
@@ -1158,16 +1185,16 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     // The dropped samples join the guard as balls of radius 0 (nothing to shrink) whose discs
     // bound the others'; the samples' own disc radii stay their spacing among themselves.
     std::vector<V3> all = positions;
-    all.insert(all.end(), options.guard_positions.begin(), options.guard_positions.end());
+    all.insert(all.end(), guard_positions.begin(), guard_positions.end());
     std::vector<V3> all_normals = normals;
-    for (const V3& g : options.guard_normals) all_normals.push_back(g.norm() > 0.0 ? V3(g.normalized()) : V3::UnitZ());
+    all_normals.insert(all_normals.end(), guard_normals.begin(), guard_normals.end());
     std::vector<V3> all_flipped(all_normals.size());
     for (std::size_t i = 0; i < all_normals.size(); ++i) all_flipped[i] = -all_normals[i];
     std::vector<double> all_spacing = SampleSpacing(all);
     std::copy(spacing.begin(), spacing.end(), all_spacing.begin());
     const auto guard = [&](Packing& packing, const std::vector<V3>& ball_normals) {
       Packing with = std::move(packing);
-      with.centres.insert(with.centres.end(), options.guard_positions.begin(), options.guard_positions.end());
+      with.centres.insert(with.centres.end(), guard_positions.begin(), guard_positions.end());
       with.radii.resize(all.size(), 0.0);
       const std::size_t shrunk =
           GuardPacking(with, all, ball_normals, all_spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
@@ -1383,7 +1410,8 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   st.seconds_evaluate = SecondsSince(phase);
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
-    LabelByWinding(field, positions, normals, tree, spacing, options.closure_reach_m, st);
+    LabelByWinding(field, positions, normals, guard_positions, guard_normals, tree, spacing, options.closure_reach_m,
+                   st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }

@@ -28,7 +28,9 @@
 // samples (winding.h, issue 20): uniform where w is on one side of 1/2 at all 8 corners, else
 // phi = (1/2 - w) / |grad w| per node (the smooth closure of a hole or an unscanned side);
 // evaluated nodes clamped to the band edge take w's side where all 8 corners are sure of it
-// (< 0.3 or > 0.7), and no node on a grid face stays inside. Where w is unclear (0.3 <= w < 1/2,
+// (< 0.3 or > 0.7), nodes farther than a trust distance from every sample take a clear w's side
+// (or, w unclear, a dropped sample's: HermiteOptions::guard_positions), and no node on a grid
+// face stays inside. Where w is unclear (0.3 <= w < 1/2,
 // or down to 0.1 behind a rim sample: an open scan's missing side) the inner balls of the nearest
 // samples decide, so the closure continues the scanned curvature (closure_beyond_grid). Last
 // SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the proxy's
@@ -70,11 +72,13 @@ struct HermiteOptions {
   const HermiteStats* packed = nullptr;
   // Samples dropped as outliers (palpa build: FindWindingOutliers), metres, with their outward
   // normals (any length > 0): no patch, no balls, no share of the winding number, but each one's
-  // tangent disc still bounds the packed balls as a sample's does (step 3). A sparse set's true
-  // samples are dropped too (the unseen bull with 500 samples: 1-2 %, such as the lone sample on
-  // a hoof's sole), and their neighbours' inner balls then poked out where they stood, making
-  // phantom solid 3-9 voxels deep; an outlier's disc can only shrink balls. Ignored without
-  // leak_guard or with `packed`.
+  // tangent disc still bounds the packed balls as a sample's does (step 3), and where the winding
+  // number is unclear a guard nearer than every sample that a node lies in front of (beyond the
+  // trust distance) puts it outside, against the estimate. A sparse set's true samples are
+  // dropped too (the unseen bull with 500 samples: 1-2 %, such as the lone sample on a hoof's
+  // sole), and their neighbours' balls and patches then carried the part on past where they
+  // stood, making phantom solid 3-9 voxels deep; an outlier's disc can only shrink balls. The
+  // packing part is skipped without leak_guard or with `packed`.
   std::vector<Eigen::Vector3d> guard_positions;
   std::vector<Eigen::Vector3d> guard_normals;
 };
