@@ -402,12 +402,17 @@ TEST(LeakGuard, SparseFandiskFalseInsideBelowUnguarded) {
   EXPECT_LE(2 * guarded.false_inside, unguarded.false_inside);
 }
 
-// Issue 20: the samples dropped as outliers keep guarding the packing (HermiteOptions::
-// guard_positions). A box 1 x 1 x 4 (a leg), 400 samples; its bottom face's samples are taken
-// out, as a sparse set's lone sole samples are by the winding test. Built without them, the side
-// walls' inner balls reach below the sole plane; with them as guards, no ball reaches more than
-// the guard's tolerance (a quarter voxel) below it, and the guards are no balls themselves.
-// The same leg with a single sample on its sole (a sparse set's hoof: the bull with 1,000 samples
+// A box 1 x 1 x 4 (a leg), its sole at z = -2, sampled on its surface.
+PointSet SampledLeg(std::size_t count) {
+  mesh::TriangleMesh leg = UnitCube();
+  for (Eigen::Vector3d& v : leg.vertices) v.z() *= 4.0;
+  auto points = mesh::SampleSurface(leg, count, 3, "leg");
+  EXPECT_TRUE(points.has_value()) << points.error().message;
+  return points ? *points : PointSet{};
+}
+
+// Issue 20: the samples dropped as outliers keep ending the part they stood on. A leg with a
+// single sample on its sole (a sparse set's hoof: the bull with 1,000 samples
 // has one), which the winding test drops. The walls' patches carry the leg on below the sole
 // where the winding number of so few samples is unclear (0.3-0.5); a guard nearer than every
 // sample, which such a node lies in front of, decides it outside (LabelByWinding's far pass).
@@ -415,15 +420,12 @@ TEST(LeakGuard, SparseFandiskFalseInsideBelowUnguarded) {
 // sole sample kept, 250-300 without it, and with it as a guard at most a third of that.
 TEST(LeakGuard, ALoneDroppedSoleSampleStillEndsTheLeg) {
   for (const std::size_t count : {200u, 300u}) {
-    mesh::TriangleMesh leg = UnitCube();
-    for (Eigen::Vector3d& v : leg.vertices) v.z() *= 4.0;
-    auto points = mesh::SampleSurface(leg, count, 3, "leg");
-    ASSERT_TRUE(points.has_value()) << points.error().message;
+    const PointSet points = SampledLeg(count);
     PointSet walls, sole, all;
-    for (std::size_t i = 0; i < points->positions.size(); ++i) {
-      if (points->normals[i].z() < -0.9) continue;
-      walls.positions.push_back(points->positions[i]);
-      walls.normals.push_back(points->normals[i]);
+    for (std::size_t i = 0; i < points.positions.size(); ++i) {
+      if (points.normals[i].z() < -0.9) continue;
+      walls.positions.push_back(points.positions[i]);
+      walls.normals.push_back(points.normals[i]);
     }
     sole.positions.emplace_back(0.05, -0.05, -2.0);
     sole.normals.emplace_back(0.0, 0.0, -1.0);
@@ -461,19 +463,21 @@ TEST(LeakGuard, ALoneDroppedSoleSampleStillEndsTheLeg) {
   }
 }
 
+// The samples dropped as outliers keep guarding the packing (HermiteOptions::guard_positions).
+// The leg with 400 samples; its sole's samples are taken out, as a sparse set's lone sole samples
+// are by the winding test. Built without them, the side walls' inner balls reach below the sole
+// plane; with them as guards, no ball reaches more than the guard's tolerance (a quarter voxel)
+// below it, and the guards are no balls themselves.
 TEST(LeakGuard, DroppedSamplesStillBoundTheBalls) {
-  mesh::TriangleMesh leg = UnitCube();
-  for (Eigen::Vector3d& v : leg.vertices) v.z() *= 4.0;
-  auto points = mesh::SampleSurface(leg, 400, 3, "leg");
-  ASSERT_TRUE(points.has_value()) << points.error().message;
+  const PointSet points = SampledLeg(400);
   PointSet kept, sole;
-  for (std::size_t i = 0; i < points->positions.size(); ++i) {
-    PointSet& to = points->normals[i].z() < -0.9 ? sole : kept;
-    to.positions.push_back(points->positions[i]);
-    to.normals.push_back(points->normals[i]);
+  for (std::size_t i = 0; i < points.positions.size(); ++i) {
+    PointSet& to = points.normals[i].z() < -0.9 ? sole : kept;
+    to.positions.push_back(points.positions[i]);
+    to.normals.push_back(points.normals[i]);
   }
   ASSERT_GE(sole.positions.size(), 10u);  // ~1/18 of the area
-  const Transform fit = FitTransform(*points, 0.06);
+  const Transform fit = FitTransform(points, 0.06);
   const PointSet device = ApplyTransform(fit, kept);
   const PointSet guards = ApplyTransform(fit, sole);
   const double sole_z = fit.scale * -2.0 + fit.offset_m.z();

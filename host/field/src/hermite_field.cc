@@ -637,8 +637,10 @@ std::vector<double> SampleSpacing(const std::vector<V3>& positions, int kth) {
 
 std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, const std::vector<V3>& ball_normals,
                          const std::vector<double>& spacing, double disc_spacings, double tolerance) {
-  const std::size_t n = positions.size();
-  if (packing.radii.size() != n || ball_normals.size() != n || spacing.size() != n || n < 2) return 0;
+  const std::size_t n = packing.radii.size();  // balls; the entries past them are discs only
+  if (positions.size() < n || ball_normals.size() != positions.size() || spacing.size() != positions.size() ||
+      packing.centres.size() != n || positions.size() < 2)
+    return 0;
   const PointCloud cloud{&positions};
   const KdTree tree(3, cloud,
                     nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));  // order-free: sorted below
@@ -1171,40 +1173,33 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
       guard_normals.push_back(options.guard_normals[g] / length);
     }
   }
-  if (options.leak_guard && options.packed == nullptr && guard_positions.empty()) {
+  if (options.leak_guard && options.packed == nullptr) {
+    // The dropped samples' discs bound the balls too (GuardPacking's entries past the balls),
+    // their radii their spacing among all; the samples' own stay their spacing among themselves.
+    std::vector<V3> with_positions, with_normals, with_flipped;
+    std::vector<double> with_spacing;
+    if (!guard_positions.empty()) {
+      with_positions = positions;
+      with_positions.insert(with_positions.end(), guard_positions.begin(), guard_positions.end());
+      with_normals = normals;
+      with_normals.insert(with_normals.end(), guard_normals.begin(), guard_normals.end());
+      with_flipped = flipped;
+      for (const V3& g : guard_normals) with_flipped.push_back(-g);
+      with_spacing = SampleSpacing(with_positions);
+      std::copy(spacing.begin(), spacing.end(), with_spacing.begin());
+    }
+    const bool with = !guard_positions.empty();
+    const std::vector<V3>& discs = with ? with_positions : positions;
+    const std::vector<double>& disc_spacing = with ? with_spacing : spacing;
     tbb::parallel_invoke(
         [&] {
-          st.inner_balls_shrunk =
-              GuardPacking(st.inner, positions, normals, spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
+          st.inner_balls_shrunk = GuardPacking(st.inner, discs, with ? with_normals : normals, disc_spacing,
+                                               kGuardDiscSpacings, kGuardToleranceVoxels * h);
         },
         [&] {
-          st.outer_balls_shrunk =
-              GuardPacking(st.outer, positions, flipped, spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
+          st.outer_balls_shrunk = GuardPacking(st.outer, discs, with ? with_flipped : flipped, disc_spacing,
+                                               kGuardDiscSpacings, kGuardToleranceVoxels * h);
         });
-  } else if (options.leak_guard && options.packed == nullptr) {
-    // The dropped samples join the guard as balls of radius 0 (nothing to shrink) whose discs
-    // bound the others'; the samples' own disc radii stay their spacing among themselves.
-    std::vector<V3> all = positions;
-    all.insert(all.end(), guard_positions.begin(), guard_positions.end());
-    std::vector<V3> all_normals = normals;
-    all_normals.insert(all_normals.end(), guard_normals.begin(), guard_normals.end());
-    std::vector<V3> all_flipped(all_normals.size());
-    for (std::size_t i = 0; i < all_normals.size(); ++i) all_flipped[i] = -all_normals[i];
-    std::vector<double> all_spacing = SampleSpacing(all);
-    std::copy(spacing.begin(), spacing.end(), all_spacing.begin());
-    const auto guard = [&](Packing& packing, const std::vector<V3>& ball_normals) {
-      Packing with = std::move(packing);
-      with.centres.insert(with.centres.end(), guard_positions.begin(), guard_positions.end());
-      with.radii.resize(all.size(), 0.0);
-      const std::size_t shrunk =
-          GuardPacking(with, all, ball_normals, all_spacing, kGuardDiscSpacings, kGuardToleranceVoxels * h);
-      with.centres.resize(n);
-      with.radii.resize(n);
-      packing = std::move(with);
-      return shrunk;
-    };
-    tbb::parallel_invoke([&] { st.inner_balls_shrunk = guard(st.inner, all_normals); },
-                         [&] { st.outer_balls_shrunk = guard(st.outer, all_flipped); });
   }
   st.seconds_packing = SecondsSince(start);
 

@@ -124,7 +124,9 @@ std::vector<double> SampleSpacing(const std::vector<Eigen::Vector3d>& positions,
 // normal -ball_normals[i], i.e. c_i = P_i - r_i * ball_normals[i]) so that no ball crosses the
 // tangent disc of radius disc_spacings * spacing[j] at any other sample P_j by more than
 // `tolerance` (same units). Discs of samples whose plane passes above P_i (concave there) are
-// not barriers. Returns the number of balls shrunk. Deterministic, parallel.
+// not barriers. positions, ball_normals and spacing may run past the packing's balls: the entries
+// beyond packing.radii.size() are discs only (samples dropped as outliers, HermiteOptions::
+// guard_positions). Returns the number of balls shrunk. Deterministic, parallel.
 std::size_t GuardPacking(Packing& packing, const std::vector<Eigen::Vector3d>& positions,
                          const std::vector<Eigen::Vector3d>& ball_normals, const std::vector<double>& spacing,
                          double disc_spacings, double tolerance);
