@@ -270,6 +270,81 @@ TEST(Normals, SeparateBodiesAreOrientedEachOnItsOwn) {
   EXPECT_EQ(report.components, 2u);
 }
 
+TEST(FlipInvertedParts, APartOrientedInwardAsAWholeIsTurnedOutward) {
+  // The union of a unit sphere and a sphere of radius 0.45 about (0, 0, 1.25) (a head on a
+  // body): each sphere's samples outside the other. The head's samples inward, as an MST that
+  // reached it through a thin neck would leave them; the winding number sees a closed sheet of
+  // its own there (level near -1/2), the body's stays near +1/2.
+  const Oriented body = Sphere(3000, 1.0);
+  const Oriented head = Sphere(600, 0.45, V3(0, 0, 1.25));
+  Oriented both;
+  std::vector<std::uint8_t> on_head;
+  for (std::size_t i = 0; i < body.positions.size(); ++i) {
+    if ((body.positions[i] - V3(0, 0, 1.25)).norm() <= 0.45) continue;
+    both.positions.push_back(body.positions[i]);
+    both.normals.push_back(body.normals[i]);
+    on_head.push_back(0);
+  }
+  for (std::size_t i = 0; i < head.positions.size(); ++i) {
+    if (head.positions[i].norm() <= 1.0) continue;
+    both.positions.push_back(head.positions[i]);
+    both.normals.push_back(head.normals[i]);
+    on_head.push_back(1);
+  }
+  const std::size_t n = both.positions.size();
+  std::size_t head_samples = 0;
+  for (const std::uint8_t h : on_head) head_samples += h;
+  ASSERT_GT(head_samples, 400u);
+  const std::vector<std::uint8_t> all(n, 1);
+  std::size_t parts = 9;
+
+  std::vector<V3> normals = both.normals;
+  for (std::size_t i = 0; i < n; ++i)
+    if (on_head[i] != 0) normals[i] = -normals[i];
+  EXPECT_EQ(FlipInvertedParts(both.positions, normals, all, parts), head_samples);
+  EXPECT_EQ(parts, 1u);
+  EXPECT_EQ(CountAgainst(normals, both.normals), 0u);
+
+  // Outward already: nothing flips.
+  normals = both.normals;
+  EXPECT_EQ(FlipInvertedParts(both.positions, normals, all, parts), 0u);
+  EXPECT_EQ(parts, 0u);
+
+  // Not eligible (an open piece's samples): left as they are.
+  for (std::size_t i = 0; i < n; ++i)
+    if (on_head[i] != 0) normals[i] = -normals[i];
+  EXPECT_EQ(FlipInvertedParts(both.positions, normals, std::vector<std::uint8_t>(n, 0), parts), 0u);
+  EXPECT_EQ(CountAgainst(normals, both.normals), head_samples);
+
+  // Fewer than 16 flipped samples are one neighbourhood's noise, for the tree to settle: kept.
+  normals = both.normals;
+  for (std::size_t i = 0; i < 10; ++i) normals[i] = -normals[i];
+  EXPECT_EQ(FlipInvertedParts(both.positions, normals, all, parts), 0u);
+}
+
+TEST(FlipInvertedParts, AThinClosedPlateKeepsBothSides) {
+  // A closed box 4 x 4 x 0.1, samples 0.08 apart on every face: its two large faces lie 1.25
+  // spacings apart, so each sample's probes reach the other side (the bull's horns and ears).
+  Oriented box;
+  const auto add = [&](const V3& p, const V3& nrm) {
+    box.positions.push_back(p);
+    box.normals.push_back(nrm);
+  };
+  for (int a = 0; a < 50; ++a)
+    for (int b = 0; b < 50; ++b)
+      for (const double side : {-1.0, 1.0})
+        add(V3(-2 + 0.08 * (a + 0.5), -2 + 0.08 * (b + 0.5), 0.05 * side), V3(0, 0, side));
+  for (int a = 0; a < 50; ++a)
+    for (const double side : {-1.0, 1.0}) {
+      add(V3(-2 + 0.08 * (a + 0.5), 2.0 * side, 0.0), V3(0, side, 0));
+      add(V3(2.0 * side, -2 + 0.08 * (a + 0.5), 0.0), V3(side, 0, 0));
+    }
+  std::vector<V3> normals = box.normals;
+  std::size_t parts = 9;
+  EXPECT_EQ(FlipInvertedParts(box.positions, normals, std::vector<std::uint8_t>(normals.size(), 1), parts), 0u);
+  EXPECT_EQ(parts, 0u);
+}
+
 TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
   const Oriented cube = Cube(20);  // spacing 0.1
   std::vector<V3> normals;

@@ -35,6 +35,17 @@ constexpr double kSelectNoise = 2.0;
 // samples near P_i still has a non-collinear pair among them (9 -> 13: fandisk 0.52 -> 0.49 %).
 constexpr std::size_t kTripleNeighbours = 12;
 
+// FlipInvertedParts: a group is the samples connected in the kInvertedGraph-nearest graph; it
+// flips when it has kInvertedMinSamples or more (fewer are one neighbourhood's noise: a sharp
+// edge's 1-2 samples reach -1 on fandisk) and a mean level below kInvertedLevel (an inverted
+// part's is near -1/2: the cow's tail -0.33; a thin part correctly oriented but mixed with its
+// other side: the bull's horn -0.15).
+constexpr std::size_t kInvertedGraph = 10;
+constexpr std::size_t kInvertedMinSamples = 16;
+constexpr double kInvertedLevel = -0.25;
+constexpr int kRepairSweeps = 3;
+constexpr int kInvertedPasses = 4;  // the last one only repairs the edges of the groups flipped before it
+
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
   std::uint32_t a, b;
@@ -239,8 +250,133 @@ std::string NormalsReport::Describe() const {
                                   : neighbours > kNormalNeighbours     ? ": the samples are very noisy"
                                                                        : "")
                     : fmt::format("normals oriented, {} sign{} changed", flipped, flipped == 1 ? "" : "s");
-  return fmt::format("{}: {} piece{} ({} closed, {} open)", what, components, components == 1 ? "" : "s",
-                     components - open_components, open_components);
+  std::string out = fmt::format("{}: {} piece{} ({} closed, {} open)", what, components, components == 1 ? "" : "s",
+                                components - open_components, open_components);
+  if (inverted_parts > 0)
+    out += fmt::format("; {} part{} oriented inward as a whole turned outward ({} normals)", inverted_parts,
+                       inverted_parts == 1 ? "" : "s", inverted_samples);
+  return out;
+}
+
+std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>& normals,
+                              const std::vector<std::uint8_t>& eligible, std::size_t& parts) {
+  parts = 0;
+  const std::size_t n = positions.size();
+  constexpr std::size_t kProbeNeighbours = 16;
+  if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kProbeNeighbours));
+  // Each sample's probe distance (as FindWindingOutliers): half its 16th neighbour's distance,
+  // within 0.4 of the nearest facing the other way (a thin wall's other side); and its graph.
+  std::vector<double> offset(n, 0.0);
+  std::vector<std::array<std::uint32_t, kInvertedGraph>> graph(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+    std::array<std::size_t, kProbeNeighbours + 1> idx{};
+    std::array<double, kProbeNeighbours + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), kProbeNeighbours + 1, idx.data(), d2.data());
+      double d = 0.5 * std::sqrt(d2[got - 1]);
+      for (std::size_t m = 0; m < got; ++m)
+        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
+          d = std::min(d, 0.4 * std::sqrt(d2[m]));
+          break;
+        }
+      offset[i] = d;
+      std::size_t e = 0;
+      for (std::size_t m = 0; m < got && e < kInvertedGraph; ++m)
+        if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
+      for (; e < kInvertedGraph; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
+    }
+  });
+  std::vector<double> level(n);
+  // The level (w just inside + w just outside) / 2, in the k-d tree's leaf order so that a
+  // range's probes lie close together and take w in one batch.
+  const auto measure = [&] {
+    const WindingNumber winding(positions, normals, areas);
+    const auto& order = tree.vAcc;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+      std::vector<V3> probes;
+      std::vector<double> w;
+      for (std::size_t at = r.begin(); at != r.end(); ++at) {
+        const std::size_t i = order[at];
+        probes.push_back(positions[i] - offset[i] * normals[i]);
+        probes.push_back(positions[i] + offset[i] * normals[i]);
+      }
+      w.resize(probes.size());
+      winding(probes, w);
+      for (std::size_t at = r.begin(); at != r.end(); ++at) {
+        const std::size_t q = 2 * (at - r.begin());
+        level[order[at]] = 0.5 * (w[q] + w[q + 1]);
+      }
+    });
+  };
+  std::vector<std::uint8_t> changed(n, 0);  // the parity of each sample's flips
+  std::vector<std::uint8_t> near_group(n, 0);
+  std::vector<std::int32_t> group(n);
+  std::vector<std::uint32_t> members;
+  for (int pass = 0; pass < kInvertedPasses; ++pass) {
+    // A group's edge is blurred by its own field: next to an inverted part, correctly oriented
+    // samples reach a level below 0 too and join it, and its own samples at the edge stay out
+    // (at a concave crease the probes reach into the other part, so w cannot tell). After the
+    // flip each such sample takes the side of its neighbours along its tangent plane (chords
+    // within 30 degrees of it: a thin wall's other side does not vote), a few sweeps, before the
+    // levels are measured again.
+    for (int sweep = 0; sweep < kRepairSweeps; ++sweep) {
+      std::vector<std::uint32_t> turn;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (near_group[i] == 0 || eligible[i] == 0) continue;
+        double vote = 0.0;
+        for (const std::uint32_t j : graph[i]) {
+          if (j == i) continue;
+          const V3 chord = (positions[j] - positions[i]).normalized();
+          if (std::abs(normals[i].dot(chord)) < 0.5) vote += normals[i].dot(normals[j]);
+        }
+        if (vote < 0.0) turn.push_back(static_cast<std::uint32_t>(i));
+      }
+      for (const std::uint32_t i : turn) {
+        normals[i] = -normals[i];
+        changed[i] ^= 1;
+      }
+      if (turn.empty()) break;
+    }
+    std::fill(near_group.begin(), near_group.end(), 0);
+    if (pass == kInvertedPasses - 1) break;  // the last pass only repairs
+    measure();
+    // Connected groups of eligible samples below level 0 (breadth first from the smallest index):
+    // a whole group flips when it is large and its mean level is clearly below 0.
+    std::fill(group.begin(), group.end(), -1);
+    std::size_t pass_flipped = 0;
+    for (std::size_t root = 0; root < n; ++root) {
+      if (group[root] >= 0 || eligible[root] == 0 || !(level[root] < 0.0)) continue;
+      group[root] = 1;
+      members.assign(1, static_cast<std::uint32_t>(root));
+      double sum = 0.0;
+      for (std::size_t q = 0; q < members.size(); ++q) {
+        const std::uint32_t u = members[q];
+        sum += level[u];
+        for (const std::uint32_t v : graph[u])
+          if (group[v] < 0 && eligible[v] != 0 && level[v] < 0.0) {
+            group[v] = 1;
+            members.push_back(v);
+          }
+      }
+      if (members.size() < kInvertedMinSamples || !(sum < kInvertedLevel * static_cast<double>(members.size())))
+        continue;
+      for (const std::uint32_t u : members) {
+        normals[u] = -normals[u];
+        changed[u] ^= 1;
+        near_group[u] = 1;
+        for (const std::uint32_t v : graph[u]) near_group[v] = 1;
+      }
+      pass_flipped += members.size();
+      ++parts;
+    }
+    if (pass_flipped == 0) break;
+  }
+  std::size_t flipped = 0;
+  for (const std::uint8_t c : changed) flipped += c;
+  return flipped;
 }
 
 void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
@@ -378,12 +514,17 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     report.open_components += open ? 1 : 0;
     flip[c] = (open && keep_file_majority) ? agreement[c] < 0 : divergence[c] < 0;
   }
-  report.flipped = 0;
+  std::vector<std::uint8_t> closed(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const bool against = (keep[i] != 0) == (flip[component[i]] != 0);
-    if (against) ++report.flipped;
     normals[i] = flip[component[i]] ? V3(-oriented[i]) : oriented[i];
+    closed[i] = flux[component[i]].norm() < 0.2 * area[component[i]] ? 1 : 0;
   }
+  // A closed piece's part that the tree oriented inward as a whole (a thin tail reached across
+  // its tip): the divergence sum of the piece is still positive, so only the winding number sees it.
+  report.inverted_samples = FlipInvertedParts(positions, normals, closed, report.inverted_parts);
+  report.flipped = 0;
+  for (std::size_t i = 0; i < n; ++i)  // `given` is `normals`: the file's is +-oriented[i] by keep[i]
+    if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;
 }
 
 }  // namespace palpa::field
