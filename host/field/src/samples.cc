@@ -264,49 +264,15 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
   constexpr std::size_t kNeighbours = 16;
   if (n <= kNeighbours || normals.size() != n) return out;
   const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kNeighbours));
-  const WindingNumber winding(positions, normals, areas);
+  std::vector<double> jump = SampleJumps(positions, normals, areas);
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  std::vector<double> jump(n, 1.0);
-  // The samples in the k-d tree's leaf order, so that a range of them lies close together and
-  // their probes take w in one batch (each sample's test is its own: the order changes nothing).
-  const auto& order = tree.vAcc;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
     std::array<std::size_t, kNeighbours + 1> idx{};
     std::array<double, kNeighbours + 1> d2{};
-    // The probes' offsets first, then w at all the probes of the range in one batch.
-    std::vector<double> probe_offset(r.size(), 0.0);
-    std::vector<Eigen::Vector3d> probes;
-    std::vector<double> w;
-    for (std::size_t at = r.begin(); at != r.end(); ++at) {
-      const std::size_t i = order[at];
-      const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
-      double d = 0.5 * std::sqrt(d2[got - 1]);
-      for (std::size_t m = 0; m < got; ++m)
-        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
-          d = std::min(d, 0.4 * std::sqrt(d2[m]));
-          break;
-        }
-      if (!(d > 0)) continue;
-      probe_offset[at - r.begin()] = d;
-      probes.push_back(positions[i] - d * normals[i]);
-      probes.push_back(positions[i] + d * normals[i]);
-    }
-    w.resize(probes.size());
-    winding(probes, w);
-    std::size_t probe = 0;
-    for (std::size_t at = r.begin(); at != r.end(); ++at) {
-      const std::size_t i = order[at];
-      const double d = probe_offset[at - r.begin()];
-      if (!(d > 0)) continue;
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const Eigen::Vector3d& p = positions[i];
       const Eigen::Vector3d& nrm = normals[i];
-      const double a = areas[i];
-      const double own_dipole = a / (4.0 * std::numbers::pi * d * d);  // at each probe, +inside -outside
-      const double rho2 = a / std::numbers::pi;
-      const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + rho2));
-      jump[i] = w[probe] - w[probe + 1] - 2.0 * own_dipole + 2.0 * own_disc;
-      probe += 2;
       if (jump[i] < kSureOutlierJump || !(jump[i] < min_jump)) continue;
       const std::size_t got = tree.knnSearch(p.data(), kNeighbours + 1, idx.data(), d2.data());
       // Between the two: next to a sharp edge or a fin the jump of a true sample is low too, but

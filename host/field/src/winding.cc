@@ -143,6 +143,55 @@ std::vector<double> SampleAreas(const std::vector<V3>& positions, int k) {
   return areas;
 }
 
+std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                const std::vector<double>& areas) {
+  constexpr std::size_t kNeighbours = 16;
+  const std::size_t n = positions.size();
+  std::vector<double> jump(n, 1.0);
+  if (n <= kNeighbours || normals.size() != n || areas.size() != n) return jump;
+  const WindingNumber winding(positions, normals, areas);
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  // The samples in the k-d tree's leaf order, so that a range of them lies close together and
+  // their probes take w in one batch.
+  const auto& order = tree.vAcc;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+    std::array<std::size_t, kNeighbours + 1> idx{};
+    std::array<double, kNeighbours + 1> d2{};
+    std::vector<double> probe_offset(r.size(), 0.0);
+    std::vector<V3> probes;
+    std::vector<double> w;
+    for (std::size_t at = r.begin(); at != r.end(); ++at) {
+      const std::size_t i = order[at];
+      const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
+      double d = 0.5 * std::sqrt(d2[got - 1]);
+      for (std::size_t m = 0; m < got; ++m)
+        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
+          d = std::min(d, 0.4 * std::sqrt(d2[m]));
+          break;
+        }
+      if (!(d > 0)) continue;
+      probe_offset[at - r.begin()] = d;
+      probes.push_back(positions[i] - d * normals[i]);
+      probes.push_back(positions[i] + d * normals[i]);
+    }
+    w.resize(probes.size());
+    winding(probes, w);
+    std::size_t probe = 0;
+    for (std::size_t at = r.begin(); at != r.end(); ++at) {
+      const std::size_t i = order[at];
+      const double d = probe_offset[at - r.begin()];
+      if (!(d > 0)) continue;
+      const double a = areas[i];
+      const double own_dipole = a * kInv4Pi / (d * d);  // at each probe, +inside -outside
+      const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi));
+      jump[i] = w[probe] - w[probe + 1] - 2.0 * own_dipole + 2.0 * own_disc;
+      probe += 2;
+    }
+  });
+  return jump;
+}
+
 double WindingNumberBruteForce(const std::vector<V3>& positions, const std::vector<V3>& normals,
                                const std::vector<double>& areas, const V3& q) {
   double w = 0.0;

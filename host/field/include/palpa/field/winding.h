@@ -31,6 +31,16 @@ namespace palpa::field {
 /// over the sphere, tests/host/winding_test.cc). Units of `positions` squared. Parallel.
 std::vector<double> SampleAreas(const std::vector<Eigen::Vector3d>& positions, int k = 8);
 
+/// The jump of w across each sample along its normal (FindWindingOutliers, samples.h):
+///   J_i = w(P_i - d n_i) - w(P_i + d n_i),  d = min(s_i / 2, 0.4 t_i),
+/// s_i the distance to the 16th nearest other sample, t_i to the nearest of those 16 whose normal
+/// is opposite (n . n_j < -0.5: a thin wall's other side, which the inner probe must not pass); the
+/// sample's own dipole counted as the disc of area a_i it stands for. About 1 on a surface sampled
+/// with the right areas; 0 where the sample disagrees with the others. `normals` unit, `areas`
+/// (SampleAreas with k = 16), same size as `positions` (more than 16); else all 1. Parallel.
+std::vector<double> SampleJumps(const std::vector<Eigen::Vector3d>& positions,
+                                const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& areas);
+
 /// w(q) summed over every sample: O(n) per query, the reference for the tree.
 double WindingNumberBruteForce(const std::vector<Eigen::Vector3d>& positions,
                                const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& areas,
