@@ -346,7 +346,7 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
     // Connected groups of eligible samples below level 0 (breadth first from the smallest index):
     // a whole group flips when it is large and its mean level is clearly below 0.
     std::fill(group.begin(), group.end(), -1);
-    std::size_t pass_flipped = 0;
+    std::vector<std::vector<std::uint32_t>> flips;
     for (std::size_t root = 0; root < n; ++root) {
       if (group[root] >= 0 || eligible[root] == 0 || !(level[root] < 0.0)) continue;
       group[root] = 1;
@@ -363,16 +363,32 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
       }
       if (members.size() < kInvertedMinSamples || !(sum < kInvertedLevel * static_cast<double>(members.size())))
         continue;
-      for (const std::uint32_t u : members) {
-        normals[u] = -normals[u];
+      for (const std::uint32_t u : members) normals[u] = -normals[u];
+      flips.push_back(members);
+    }
+    if (flips.empty()) break;
+    // A flip stands when it lifts the group's mean level as far above 0 as it was below: an
+    // inverted part's does (the cow's tail -0.33 -> +0.4); a part too thin for its samples'
+    // lines (a tail a spacing across, its samples all round it) stays mixed, and is left.
+    measure();
+    std::size_t stood = 0;
+    for (const std::vector<std::uint32_t>& g : flips) {
+      double sum = 0.0;
+      for (const std::uint32_t u : g) sum += level[u];
+      const bool stands = sum > -kInvertedLevel * static_cast<double>(g.size());
+      for (const std::uint32_t u : g) {
+        if (!stands) {
+          normals[u] = -normals[u];
+          continue;
+        }
         changed[u] ^= 1;
         near_group[u] = 1;
         for (const std::uint32_t v : graph[u]) near_group[v] = 1;
       }
-      pass_flipped += members.size();
-      ++parts;
+      stood += stands ? 1 : 0;
     }
-    if (pass_flipped == 0) break;
+    parts += stood;
+    if (stood == 0) break;  // the same groups would be found again
   }
   std::size_t flipped = 0;
   for (const std::uint8_t c : changed) flipped += c;

@@ -112,12 +112,15 @@ void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vecto
 /// inward as a whole (the MST reached a thin tail across its tip) is a closed sheet of its own
 /// with w near -1 inside it, and its samples' level is near -1/2. Groups of samples connected in
 /// the 10-nearest graph whose level is below 0 flip when they hold 16 samples or more and their
-/// mean level is below -1/4; up to three passes, w recomputed after each. d is half the distance
-/// to the 16th nearest, within 0.4 of the nearest facing the other way (FindWindingOutliers' probes).
-/// `eligible` (size n, 0 or 1): the samples of closed pieces (open ones have levels near 0 on the
-/// sheet itself). CGAL's cow, 5,000 samples, normals estimated: 210 signs against the exact
-/// normals -> 109 (its tail), wrong sign in the band 3.05 -> 2.11 % (exact normals 1.35 %); ten other
-/// meshes: no group flipped. Returns the samples flipped; `parts` the groups. Parallel, deterministic.
+/// mean level is below -1/4, and the flip stands when their mean level, measured again, is above
+/// +1/4 (a part too thin for its lines stays mixed); then the samples of and beside a flipped group
+/// take their tangent-plane neighbours' side. Up to three passes. d is half the distance to the
+/// 16th nearest, within 0.4 of the nearest facing the other way (SampleJumps' probes). `eligible`
+/// (size n, 0 or 1): the samples of closed pieces (an open sheet's own level is near 0).
+/// CGAL's cow, 5,000 samples, normals estimated: 210 signs against the exact normals -> 109 (its
+/// tail), wrong sign in the band 3.05 -> 2.12 % (exact normals 1.35 %); 21 other meshes, three
+/// draws: the elk's and the bull's too, nothing else (docs/field-methods.md). Returns the samples
+/// whose sign changed; `parts` the groups that stood. Parallel, deterministic.
 std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                               const std::vector<std::uint8_t>& eligible, std::size_t& parts);
 
