@@ -264,53 +264,27 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
   const std::size_t n = positions.size();
   constexpr std::size_t kProbeNeighbours = 16;
   if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kProbeNeighbours));
-  // Each sample's probe distance (as FindWindingOutliers): half its 16th neighbour's distance,
-  // within 0.4 of the nearest facing the other way (a thin wall's other side); and its graph.
-  std::vector<double> offset(n, 0.0);
+  // The probes stay where the first normals put them (a flip moves a probe to the other side).
+  const std::vector<double> offset = ProbeOffsets(positions, normals);
   std::vector<std::array<std::uint32_t, kInvertedGraph>> graph(n);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::array<std::size_t, kProbeNeighbours + 1> idx{};
-    std::array<double, kProbeNeighbours + 1> d2{};
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), kProbeNeighbours + 1, idx.data(), d2.data());
-      double d = 0.5 * std::sqrt(d2[got - 1]);
-      for (std::size_t m = 0; m < got; ++m)
-        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
-          d = std::min(d, 0.4 * std::sqrt(d2[m]));
-          break;
-        }
-      offset[i] = d;
-      std::size_t e = 0;
-      for (std::size_t m = 0; m < got && e < kInvertedGraph; ++m)
-        if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
-      for (; e < kInvertedGraph; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
-    }
-  });
-  std::vector<double> level(n);
-  // The level (w just inside + w just outside) / 2, in the k-d tree's leaf order so that a
-  // range's probes lie close together and take w in one batch.
-  const auto measure = [&] {
-    const WindingNumber winding(positions, normals, areas);
-    const auto& order = tree.vAcc;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
-      std::vector<V3> probes;
-      std::vector<double> w;
-      for (std::size_t at = r.begin(); at != r.end(); ++at) {
-        const std::size_t i = order[at];
-        probes.push_back(positions[i] - offset[i] * normals[i]);
-        probes.push_back(positions[i] + offset[i] * normals[i]);
-      }
-      w.resize(probes.size());
-      winding(probes, w);
-      for (std::size_t at = r.begin(); at != r.end(); ++at) {
-        const std::size_t q = 2 * (at - r.begin());
-        level[order[at]] = 0.5 * (w[q] + w[q + 1]);
+  {
+    const detail::PointCloud cloud{&positions};
+    const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+      std::array<std::size_t, kInvertedGraph + 1> idx{};
+      std::array<double, kInvertedGraph + 1> d2{};
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        const std::size_t got = tree.knnSearch(positions[i].data(), kInvertedGraph + 1, idx.data(), d2.data());
+        std::size_t e = 0;
+        for (std::size_t m = 0; m < got && e < kInvertedGraph; ++m)
+          if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
+        for (; e < kInvertedGraph; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
       }
     });
-  };
+  }
+  std::vector<double> level;
+  const auto measure = [&] { level = SampleLevels(positions, normals, areas, offset); };
   std::vector<std::uint8_t> changed(n, 0);  // the parity of each sample's flips
   std::vector<std::uint8_t> near_group(n, 0);
   std::vector<std::int32_t> group(n);

@@ -143,26 +143,17 @@ std::vector<double> SampleAreas(const std::vector<V3>& positions, int k) {
   return areas;
 }
 
-std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vector<V3>& normals,
-                                const std::vector<double>& areas) {
+std::vector<double> ProbeOffsets(const std::vector<V3>& positions, const std::vector<V3>& normals) {
   constexpr std::size_t kNeighbours = 16;
   const std::size_t n = positions.size();
-  std::vector<double> jump(n, 1.0);
-  if (n <= kNeighbours || normals.size() != n || areas.size() != n) return jump;
-  const WindingNumber winding(positions, normals, areas);
+  std::vector<double> offset(n, 0.0);
+  if (n <= kNeighbours || normals.size() != n) return offset;
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  // The samples in the k-d tree's leaf order, so that a range of them lies close together and
-  // their probes take w in one batch.
-  const auto& order = tree.vAcc;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::array<std::size_t, kNeighbours + 1> idx{};
     std::array<double, kNeighbours + 1> d2{};
-    std::vector<double> probe_offset(r.size(), 0.0);
-    std::vector<V3> probes;
-    std::vector<double> w;
-    for (std::size_t at = r.begin(); at != r.end(); ++at) {
-      const std::size_t i = order[at];
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
       double d = 0.5 * std::sqrt(d2[got - 1]);
       for (std::size_t m = 0; m < got; ++m)
@@ -170,26 +161,80 @@ std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vec
           d = std::min(d, 0.4 * std::sqrt(d2[m]));
           break;
         }
-      if (!(d > 0)) continue;
-      probe_offset[at - r.begin()] = d;
-      probes.push_back(positions[i] - d * normals[i]);
-      probes.push_back(positions[i] + d * normals[i]);
+      offset[i] = d;
+    }
+  });
+  return offset;
+}
+
+namespace {
+
+// w at P_i - d_i n_i (inside) and P_i + d_i n_i (outside) of every sample with d_i > 0, in the
+// k-d tree's leaf order so that a range's probes lie close together and take w in one batch
+// (each probe's w is what operator() gives it: the order changes nothing).
+void ProbeWinding(const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& areas,
+                  const std::vector<double>& offset, std::vector<double>& inside, std::vector<double>& outside) {
+  const std::size_t n = positions.size();
+  inside.assign(n, 0.0);
+  outside.assign(n, 0.0);
+  const WindingNumber winding(positions, normals, areas);
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const auto& order = tree.vAcc;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+    std::vector<V3> probes;
+    std::vector<double> w;
+    for (std::size_t at = r.begin(); at != r.end(); ++at) {
+      const std::size_t i = order[at];
+      if (!(offset[i] > 0)) continue;
+      probes.push_back(positions[i] - offset[i] * normals[i]);
+      probes.push_back(positions[i] + offset[i] * normals[i]);
     }
     w.resize(probes.size());
     winding(probes, w);
     std::size_t probe = 0;
     for (std::size_t at = r.begin(); at != r.end(); ++at) {
       const std::size_t i = order[at];
-      const double d = probe_offset[at - r.begin()];
-      if (!(d > 0)) continue;
-      const double a = areas[i];
-      const double own_dipole = a * kInv4Pi / (d * d);  // at each probe, +inside -outside
-      const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi));
-      jump[i] = w[probe] - w[probe + 1] - 2.0 * own_dipole + 2.0 * own_disc;
+      if (!(offset[i] > 0)) continue;
+      inside[i] = w[probe];
+      outside[i] = w[probe + 1];
       probe += 2;
     }
   });
+}
+
+}  // namespace
+
+std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                const std::vector<double>& areas) {
+  constexpr std::size_t kNeighbours = 16;
+  const std::size_t n = positions.size();
+  std::vector<double> jump(n, 1.0);
+  if (n <= kNeighbours || normals.size() != n || areas.size() != n) return jump;
+  const std::vector<double> offset = ProbeOffsets(positions, normals);
+  std::vector<double> inside, outside;
+  ProbeWinding(positions, normals, areas, offset, inside, outside);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = offset[i];
+    if (!(d > 0)) continue;
+    const double a = areas[i];
+    const double own_dipole = a * kInv4Pi / (d * d);  // at each probe, +inside -outside
+    const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi));
+    jump[i] = inside[i] - outside[i] - 2.0 * own_dipole + 2.0 * own_disc;
+  }
   return jump;
+}
+
+std::vector<double> SampleLevels(const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                 const std::vector<double>& areas, const std::vector<double>& offsets) {
+  const std::size_t n = positions.size();
+  std::vector<double> level(n, 0.5);
+  if (n == 0 || normals.size() != n || areas.size() != n || offsets.size() != n) return level;
+  std::vector<double> inside, outside;
+  ProbeWinding(positions, normals, areas, offsets, inside, outside);
+  for (std::size_t i = 0; i < n; ++i)
+    if (offsets[i] > 0) level[i] = 0.5 * (inside[i] + outside[i]);
+  return level;
 }
 
 double WindingNumberBruteForce(const std::vector<V3>& positions, const std::vector<V3>& normals,
