@@ -257,6 +257,31 @@ TEST(Normals, AOneSidedScanOfADomeIsOrientedOutward) {
   EXPECT_EQ(report.open_components, 1u);
 }
 
+TEST(Normals, AnOpenScanFacingTheRestIsOrientedByItsWindingLevel) {
+  // A closed sphere and, 3 radii away, a cap of a smaller sphere scanned from the side facing it
+  // (one-sided, open). The cap's outward normals point towards the centre of all samples, so the
+  // divergence sum about it calls them inward; the winding number's level (w just inside + just
+  // outside) / 2 is positive only for the outward cap, whatever its shape or place.
+  Oriented both = Sphere(3000, 1.0);
+  const Oriented cap = Sphere(4000, 0.5, V3(3, 0, 0), -2.0);
+  std::size_t cap_samples = 0;
+  for (std::size_t i = 0; i < cap.positions.size(); ++i) {
+    if (cap.normals[i].x() > -0.3) continue;  // the side facing the sphere
+    both.positions.push_back(cap.positions[i]);
+    both.normals.push_back(cap.normals[i]);
+    ++cap_samples;
+  }
+  ASSERT_GT(cap_samples, 1000u);
+  std::vector<V3> normals;
+  EstimateNormalLines(both.positions, normals);
+  NormalsReport report;
+  OrientNormals(both.positions, normals, false, report, true);
+  EXPECT_EQ(report.components, 2u);
+  EXPECT_EQ(report.open_components, 1u);
+  EXPECT_EQ(report.open_level_flipped, 1u);
+  EXPECT_EQ(CountAgainst(normals, both.normals), 0u);
+}
+
 TEST(Normals, SeparateBodiesAreOrientedEachOnItsOwn) {
   Oriented both = Sphere(1500, 1.0, V3(-3, 0, 0));
   const Oriented second = Sphere(1500, 0.7, V3(3, 1, 0));

@@ -17,8 +17,11 @@
 //     sum a_i n_i . (P_i - c) = 3 V > 0 for outward normals (c: the area-weighted centre of all
 //     samples, which drops out of the sum for a closed component);
 //   open (a one-sided scan, a hole): under `orient`, the majority (by area) of the file's own
-//     signs, which were mostly right; under `estimate`, the same divergence sum about c, positive
-//     for a scan seen from outside (a dome, a one-sided range scan of a convex part).
+//     signs, which were mostly right; under `estimate`, the same divergence sum about c, then
+//     reversed where the samples' mean winding level (SampleLevels, winding.h) is below 0: the
+//     level is positive for a scan seen from outside whatever its shape, the divergence sum only
+//     for a convex part (a dome, a one-sided range scan of one).
+// Then parts of any piece that the tree oriented inward as a whole are turned (FlipInvertedParts).
 // Limits: an open scan of a concave sheet seen from inside (a bowl's inner face alone) gets the
 // inward sign under `estimate`; the inner wall of a cavity (a closed component inside another)
 // is oriented as a separate solid. Deterministic for any thread count.
@@ -40,16 +43,17 @@ enum class NormalsMode {
 };
 
 struct NormalsReport {
-  std::size_t estimated = 0;         ///< normals estimated (estimate, or a file without normals)
-  std::size_t flipped = 0;           ///< orient: normals whose sign was changed from the file's
-  std::size_t components = 0;        ///< connected pieces of the neighbour graph
-  std::size_t open_components = 0;   ///< of which open (sign from the majority or the divergence sum)
-  int neighbours = 0;                ///< of the jet fit (EstimateNormalLines' result), when estimated
-  std::size_t inverted_parts = 0;    ///< parts of closed pieces turned outward (FlipInvertedParts)
-  std::size_t inverted_samples = 0;  ///< their samples
+  std::size_t estimated = 0;           ///< normals estimated (estimate, or a file without normals)
+  std::size_t flipped = 0;             ///< orient: normals whose sign was changed from the file's
+  std::size_t components = 0;          ///< connected pieces of the neighbour graph
+  std::size_t open_components = 0;     ///< of which open (sign from the majority or the divergence sum)
+  int neighbours = 0;                  ///< of the jet fit (EstimateNormalLines' result), when estimated
+  std::size_t inverted_parts = 0;      ///< parts of closed pieces turned outward (FlipInvertedParts)
+  std::size_t inverted_samples = 0;    ///< their samples
+  std::size_t open_level_flipped = 0;  ///< estimate: open pieces whose sign the winding level reversed
   /// "5210 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece
-  /// (1 closed, 0 open)", then "; 1 part oriented inward as a whole turned outward (109 normals)"
-  /// when FlipInvertedParts turned any
+  /// (1 closed, 0 open)", then "; 1 open piece turned outward by the winding number" and "; 1 part
+  /// oriented inward as a whole turned outward (109 normals)" when either happened
   std::string Describe() const;
 };
 
@@ -106,7 +110,7 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// the tree crosses edges reliably only on smooth normals. Parallel, deterministic.
 void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals);
 
-/// Turns outward the parts of closed pieces that an orientation left inward as a whole. A closed
+/// Turns outward the parts of a piece that an orientation left inward as a whole. A closed
 /// surface oriented outward has a winding number w (winding.h) near 1 just inside each sample and
 /// near 0 just outside: the level (w(P - d n) + w(P + d n)) / 2 is near 1/2. A part of it oriented
 /// inward as a whole (the MST reached a thin tail across its tip) is a closed sheet of its own
@@ -116,7 +120,8 @@ void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vecto
 /// +1/4 (a part too thin for its lines stays mixed); then the samples of and beside a flipped group
 /// take their tangent-plane neighbours' side. Up to three passes. d is half the distance to the
 /// 16th nearest, within 0.4 of the nearest facing the other way (SampleJumps' probes). `eligible`
-/// (size n, 0 or 1): the samples of closed pieces (an open sheet's own level is near 0).
+/// (size n, 0 or 1): the samples that may flip (OrientNormals: all; an open sheet's own level is
+/// 0 to 1/2, and a flip of a piece of it does not lift its level, so does not stand).
 /// CGAL's cow, 5,000 samples, normals estimated: 210 signs against the exact normals -> 109 (its
 /// tail), wrong sign in the band 3.05 -> 2.12 % (exact normals 1.35 %); 21 other meshes, three
 /// draws: the elk's and the bull's too, nothing else (docs/field-methods.md). Returns the samples
