@@ -347,6 +347,30 @@ TEST(FlipInvertedParts, APartOrientedInwardAsAWholeIsTurnedOutward) {
   EXPECT_EQ(FlipInvertedParts(both.positions, normals, all, parts), 0u);
 }
 
+TEST(FlipInvertedParts, AFlipThatDoesNotLiftTheLevelDoesNotStand) {
+  // A flat disc (20 x 20 lattice within radius 0.3) at the centre of a sphere whose normals point
+  // inward and may not flip: w is -1 all round the disc, so its samples' level is about -1 and
+  // they form a group; flipping a flat sheet leaves its own share of the level at 0, so the
+  // re-measured level stays about -1 and the flip is undone.
+  Oriented set = Sphere(3000, 1.0);
+  for (V3& nrm : set.normals) nrm = -nrm;
+  std::vector<std::uint8_t> eligible(set.positions.size(), 0);
+  for (int a = 0; a < 20; ++a)
+    for (int b = 0; b < 20; ++b) {
+      const V3 p(-0.3 + 0.03 * (a + 0.5), -0.3 + 0.03 * (b + 0.5), 0.0);
+      if (p.norm() > 0.3) continue;
+      set.positions.push_back(p);
+      set.normals.emplace_back(0, 0, 1);
+      eligible.push_back(1);
+    }
+  ASSERT_GT(set.positions.size(), 3200u);
+  std::vector<V3> normals = set.normals;
+  std::size_t parts = 9;
+  EXPECT_EQ(FlipInvertedParts(set.positions, normals, eligible, parts), 0u);
+  EXPECT_EQ(parts, 0u);
+  EXPECT_EQ(CountAgainst(normals, set.normals), 0u);
+}
+
 TEST(FlipInvertedParts, AThinClosedPlateKeepsBothSides) {
   // A closed box 4 x 4 x 0.1, samples 0.08 apart on every face: its two large faces lie 1.25
   // spacings apart, so each sample's probes reach the other side (the bull's horns and ears).
