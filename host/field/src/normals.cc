@@ -4,8 +4,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <numbers>
 #include <numeric>
 #include <vector>
@@ -519,11 +517,11 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   if (!keep_file_majority && report.open_components > 0) {
     const std::vector<double> level = SampleLevels(positions, normals, SampleAreas(positions, kLevelAreaNeighbours),
                                                    ProbeOffsets(positions, normals));
-    std::vector<double> mean(pieces, 0.0);
-    for (std::size_t i = 0; i < n; ++i) mean[component[i]] += areas[i] * level[i];
+    std::vector<double> level_sum(pieces, 0.0);  // the mean's sign: sum_i a_i level_i
+    for (std::size_t i = 0; i < n; ++i) level_sum[component[i]] += areas[i] * level[i];
     for (std::size_t c = 0; c < pieces; ++c) {
       const bool open = flux[c].norm() >= 0.2 * area[c];
-      if (open && mean[c] < 0.0) {
+      if (open && level_sum[c] < 0.0) {
         flip[c] = flip[c] != 0 ? 0 : 1;
         ++report.open_level_flipped;
       }

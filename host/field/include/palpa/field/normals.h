@@ -132,11 +132,13 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
 /// edge exact face normals are near perpendicular and carry no sign), then the component's outward
-/// sign, then each given normal takes the sign of its oriented jet normal. `keep_file_majority`
-/// (orient mode) decides open components by the majority of the signs given.
-/// `given_are_jet_lines`: the normals are EstimateNormalLines' already (estimate mode; not fitted
-/// twice). Unit normals in, same lines out. Counts into `report` (flipped, components,
-/// open_components). O(n log n); parallel and deterministic.
+/// sign, then each given normal takes the sign of its oriented jet normal, then FlipInvertedParts
+/// over all samples. `keep_file_majority` (orient mode) decides open components by the majority of
+/// the signs given; without it an open component whose mean winding level (SampleLevels, by area)
+/// is below 0 is reversed. `given_are_jet_lines`: the normals are EstimateNormalLines' already
+/// (estimate mode; not fitted twice). Unit normals in, same lines out. Counts into `report`
+/// (flipped, components, open_components, open_level_flipped, inverted_parts, inverted_samples).
+/// O(n log n); parallel and deterministic.
 void OrientNormals(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                    bool keep_file_majority, NormalsReport& report, bool given_are_jet_lines = false);
 
