@@ -41,11 +41,12 @@ TEST(SampleAreas, SumToTheSphereArea) {
 // (Fibonacci lattice: 3 %) and its neighbours' point dipoles' ripple at the probes (0.105 here). A sample whose normal
 // is flipped has all its neighbours facing the other way, so its probes stay within 0.4 of the nearest's distance,
 // where the others' dipoles cancel: its jump is near 0 (FindWindingOutliers' threshold is 0.5).
-TEST(SampleJumps, OneAcrossASphereAndNearZeroAtAFlippedNormal) {
+TEST(SampleProbes, JumpsOneAcrossASphereAndNearZeroAtAFlippedNormal) {
   std::vector<V3> p, n;
   FibonacciSphere(3000, 2.0, p, n);
-  const std::vector<double> areas = SampleAreas(p, 16);
-  const std::vector<double> jump = SampleJumps(p, n, areas);
+  const SampleProbes probes(p, n);
+  EXPECT_EQ(probes.areas(), SampleAreas(p, 16));  // the same k-nearest distances
+  const std::vector<double> jump = probes.Jumps(n);
   ASSERT_EQ(jump.size(), p.size());
   double worst = 0;
   for (const double j : jump) worst = std::max(worst, std::abs(j - 1.0));
@@ -55,10 +56,10 @@ TEST(SampleJumps, OneAcrossASphereAndNearZeroAtAFlippedNormal) {
   std::nth_element(sorted.begin(), sorted.begin() + mid, sorted.end());
   EXPECT_NEAR(sorted[sorted.size() / 2], 1.0, 0.06);  // 0.950: the point dipoles read low between them
   n[100] = -n[100];
-  EXPECT_LT(std::abs(SampleJumps(p, n, areas)[100]), 0.25);
+  EXPECT_LT(std::abs(SampleProbes(p, n).Jumps(n)[100]), 0.25);
   // Too few samples for the 16 neighbours: all 1 (nothing measured).
   const std::vector<V3> few(p.begin(), p.begin() + 10), few_n(n.begin(), n.begin() + 10);
-  for (const double j : SampleJumps(few, few_n, SampleAreas(few, 16))) EXPECT_EQ(j, 1.0);
+  for (const double j : SampleProbes(few, few_n).Jumps(few_n)) EXPECT_EQ(j, 1.0);
 }
 
 // The analytic answer: 1 strictly inside a closed surface, 0 outside. Sampled, w deviates near the

@@ -44,8 +44,6 @@ constexpr std::size_t kInvertedGraph = 10;
 constexpr std::size_t kInvertedMinSamples = 16;
 constexpr double kInvertedLevel = -0.25;
 constexpr int kRepairSweeps = 3;
-// SampleLevels' areas, as the build's winding number (SampleAreas' k).
-constexpr int kLevelAreaNeighbours = 16;
 constexpr int kInvertedPasses = 4;  // the last one only repairs the edges of the groups flipped before it
 
 struct Edge {
@@ -269,9 +267,8 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
   const std::size_t n = positions.size();
   constexpr std::size_t kProbeNeighbours = 16;
   if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
-  const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kProbeNeighbours));
   // The probes stay where the first normals put them (a flip moves a probe to the other side).
-  const std::vector<double> offset = ProbeOffsets(positions, normals);
+  const SampleProbes probes(positions, normals);
   std::vector<std::array<std::uint32_t, kInvertedGraph>> graph(n);
   {
     const detail::PointCloud cloud{&positions};
@@ -289,7 +286,7 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
     });
   }
   std::vector<double> level;
-  const auto measure = [&] { level = SampleLevels(positions, normals, areas, offset); };
+  const auto measure = [&] { level = probes.Levels(normals); };
   std::vector<std::uint8_t> changed(n, 0);  // the parity of each sample's flips
   std::vector<std::uint8_t> near_group(n, 0);
   std::vector<std::int32_t> group(n);
@@ -510,13 +507,12 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     flip[c] = (open && keep_file_majority) ? agreement[c] < 0 : divergence[c] < 0;
   }
   for (std::size_t i = 0; i < n; ++i) normals[i] = flip[component[i]] ? V3(-oriented[i]) : oriented[i];
-  // Under estimate, an open piece takes the sign of its samples' mean level (SampleLevels, by
+  // Under estimate, an open piece takes the sign of its samples' mean level (SampleProbes::Levels, by
   // area): positive for a scan seen from outside whatever its shape, where the divergence sum
   // about c assumes a convex part (one-view scans: the camel's came out wholly inward, 54 % of the
   // band wrong; knot1's second piece, the bull's).
   if (!keep_file_majority && report.open_components > 0) {
-    const std::vector<double> level = SampleLevels(positions, normals, SampleAreas(positions, kLevelAreaNeighbours),
-                                                   ProbeOffsets(positions, normals));
+    const std::vector<double> level = SampleProbes(positions, normals).Levels(normals);
     std::vector<double> level_sum(pieces, 0.0);  // the mean's sign: sum_i a_i level_i
     for (std::size_t i = 0; i < n; ++i) level_sum[component[i]] += areas[i] * level[i];
     for (std::size_t c = 0; c < pieces; ++c) {

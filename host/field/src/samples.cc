@@ -263,8 +263,7 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
   const std::size_t n = positions.size();
   constexpr std::size_t kNeighbours = 16;
   if (n <= kNeighbours || normals.size() != n) return out;
-  const std::vector<double> areas = SampleAreas(positions, static_cast<int>(kNeighbours));
-  std::vector<double> jump = SampleJumps(positions, normals, areas);
+  std::vector<double> jump = SampleProbes(positions, normals).Jumps(normals);
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {

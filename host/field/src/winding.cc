@@ -143,11 +143,11 @@ std::vector<double> SampleAreas(const std::vector<V3>& positions, int k) {
   return areas;
 }
 
-std::vector<double> ProbeOffsets(const std::vector<V3>& positions, const std::vector<V3>& normals) {
-  constexpr std::size_t kNeighbours = 16;
+SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V3>& normals) : positions_(positions) {
   const std::size_t n = positions.size();
-  std::vector<double> offset(n, 0.0);
-  if (n <= kNeighbours || normals.size() != n) return offset;
+  if (n <= kNeighbours || normals.size() != n) return;
+  areas_.assign(n, 0.0);
+  offsets_.assign(n, 0.0);
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
@@ -155,47 +155,40 @@ std::vector<double> ProbeOffsets(const std::vector<V3>& positions, const std::ve
     std::array<double, kNeighbours + 1> d2{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
+      areas_[i] = std::numbers::pi * d2[got - 1] / static_cast<double>(got - 1);  // as SampleAreas
       double d = 0.5 * std::sqrt(d2[got - 1]);
       for (std::size_t m = 0; m < got; ++m)
         if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
           d = std::min(d, 0.4 * std::sqrt(d2[m]));
           break;
         }
-      offset[i] = d;
+      offsets_[i] = d;
     }
   });
-  return offset;
+  order_.assign(tree.vAcc.begin(), tree.vAcc.end());
 }
 
-namespace {
-
-// w at P_i - d_i n_i (inside) and P_i + d_i n_i (outside) of every sample with d_i > 0, in the
-// k-d tree's leaf order so that a range's probes lie close together and take w in one batch
-// (each probe's w is what operator() gives it: the order changes nothing).
-void ProbeWinding(const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& areas,
-                  const std::vector<double>& offset, std::vector<double>& inside, std::vector<double>& outside) {
-  const std::size_t n = positions.size();
+void SampleProbes::Winding(const std::vector<V3>& normals, std::vector<double>& inside,
+                           std::vector<double>& outside) const {
+  const std::size_t n = positions_.size();
   inside.assign(n, 0.0);
   outside.assign(n, 0.0);
-  const WindingNumber winding(positions, normals, areas);
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  const auto& order = tree.vAcc;
+  const WindingNumber winding(positions_, normals, areas_);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
     std::vector<V3> probes;
     std::vector<double> w;
     for (std::size_t at = r.begin(); at != r.end(); ++at) {
-      const std::size_t i = order[at];
-      if (!(offset[i] > 0)) continue;
-      probes.push_back(positions[i] - offset[i] * normals[i]);
-      probes.push_back(positions[i] + offset[i] * normals[i]);
+      const std::size_t i = order_[at];
+      if (!(offsets_[i] > 0)) continue;
+      probes.push_back(positions_[i] - offsets_[i] * normals[i]);
+      probes.push_back(positions_[i] + offsets_[i] * normals[i]);
     }
     w.resize(probes.size());
     winding(probes, w);
     std::size_t probe = 0;
     for (std::size_t at = r.begin(); at != r.end(); ++at) {
-      const std::size_t i = order[at];
-      if (!(offset[i] > 0)) continue;
+      const std::size_t i = order_[at];
+      if (!(offsets_[i] > 0)) continue;
       inside[i] = w[probe];
       outside[i] = w[probe + 1];
       probe += 2;
@@ -203,21 +196,16 @@ void ProbeWinding(const std::vector<V3>& positions, const std::vector<V3>& norma
   });
 }
 
-}  // namespace
-
-std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vector<V3>& normals,
-                                const std::vector<double>& areas) {
-  constexpr std::size_t kNeighbours = 16;
-  const std::size_t n = positions.size();
+std::vector<double> SampleProbes::Jumps(const std::vector<V3>& normals) const {
+  const std::size_t n = positions_.size();
   std::vector<double> jump(n, 1.0);
-  if (n <= kNeighbours || normals.size() != n || areas.size() != n) return jump;
-  const std::vector<double> offset = ProbeOffsets(positions, normals);
+  if (order_.empty() || normals.size() != n) return jump;
   std::vector<double> inside, outside;
-  ProbeWinding(positions, normals, areas, offset, inside, outside);
+  Winding(normals, inside, outside);
   for (std::size_t i = 0; i < n; ++i) {
-    const double d = offset[i];
+    const double d = offsets_[i];
     if (!(d > 0)) continue;
-    const double a = areas[i];
+    const double a = areas_[i];
     const double own_dipole = a * kInv4Pi / (d * d);  // at each probe, +inside -outside
     const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi));
     jump[i] = inside[i] - outside[i] - 2.0 * own_dipole + 2.0 * own_disc;
@@ -225,15 +213,14 @@ std::vector<double> SampleJumps(const std::vector<V3>& positions, const std::vec
   return jump;
 }
 
-std::vector<double> SampleLevels(const std::vector<V3>& positions, const std::vector<V3>& normals,
-                                 const std::vector<double>& areas, const std::vector<double>& offsets) {
-  const std::size_t n = positions.size();
+std::vector<double> SampleProbes::Levels(const std::vector<V3>& normals) const {
+  const std::size_t n = positions_.size();
   std::vector<double> level(n, 0.5);
-  if (n == 0 || normals.size() != n || areas.size() != n || offsets.size() != n) return level;
+  if (order_.empty() || normals.size() != n) return level;
   std::vector<double> inside, outside;
-  ProbeWinding(positions, normals, areas, offsets, inside, outside);
+  Winding(normals, inside, outside);
   for (std::size_t i = 0; i < n; ++i)
-    if (offsets[i] > 0) level[i] = 0.5 * (inside[i] + outside[i]);
+    if (offsets_[i] > 0) level[i] = 0.5 * (inside[i] + outside[i]);
   return level;
 }
 

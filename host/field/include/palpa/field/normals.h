@@ -18,7 +18,7 @@
 //     samples, which drops out of the sum for a closed component);
 //   open (a one-sided scan, a hole): under `orient`, the majority (by area) of the file's own
 //     signs, which were mostly right; under `estimate`, the same divergence sum about c, then
-//     reversed where the samples' mean winding level (SampleLevels, winding.h) is below 0: the
+//     reversed where the samples' mean winding level (SampleProbes::Levels, winding.h) is below 0: the
 //     level is positive for a scan seen from outside whatever its shape, the divergence sum only
 //     for a convex part (a dome, a one-sided range scan of one).
 // Then parts of any piece that the tree oriented inward as a whole are turned (FlipInvertedParts).
@@ -119,7 +119,7 @@ void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vecto
 /// mean level is below -1/4, and the flip stands when their mean level, measured again, is above
 /// +1/4 (a part too thin for its lines stays mixed); then the samples of and beside a flipped group
 /// take their tangent-plane neighbours' side. Up to three passes. d is half the distance to the
-/// 16th nearest, within 0.4 of the nearest facing the other way (SampleJumps' probes). `eligible`
+/// 16th nearest, within 0.4 of the nearest facing the other way (SampleProbes, winding.h). `eligible`
 /// (size n, 0 or 1): the samples that may flip (OrientNormals: all; an open sheet's own level is
 /// 0 to 1/2, and a flip of a piece of it does not lift its level, so does not stand).
 /// CGAL's cow, 5,000 samples, normals estimated: 210 signs against the exact normals -> 109 (its
@@ -134,7 +134,7 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// edge exact face normals are near perpendicular and carry no sign), then the component's outward
 /// sign, then each given normal takes the sign of its oriented jet normal, then FlipInvertedParts
 /// over all samples. `keep_file_majority` (orient mode) decides open components by the majority of
-/// the signs given; without it an open component whose mean winding level (SampleLevels, by area)
+/// the signs given; without it an open component whose mean winding level (SampleProbes::Levels, by area)
 /// is below 0 is reversed. `given_are_jet_lines`: the normals are EstimateNormalLines' already
 /// (estimate mode; not fitted twice). Unit normals in, same lines out. Counts into `report`
 /// (flipped, components, open_components, open_level_flipped, inverted_parts, inverted_samples).

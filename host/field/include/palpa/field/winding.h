@@ -31,31 +31,41 @@ namespace palpa::field {
 /// over the sphere, tests/host/winding_test.cc). Units of `positions` squared. Parallel.
 std::vector<double> SampleAreas(const std::vector<Eigen::Vector3d>& positions, int k = 8);
 
-/// Each sample's probe distance d_i = min(s_i / 2, 0.4 t_i): s_i the distance to its 16th nearest
-/// other sample, t_i to the nearest of those 16 whose normal is opposite (n . n_j < -0.5: a thin
-/// wall's other side, which a probe must not pass). Units of the positions; 0 for all when there
-/// are 16 samples or fewer or the sizes differ. Parallel.
-std::vector<double> ProbeOffsets(const std::vector<Eigen::Vector3d>& positions,
-                                 const std::vector<Eigen::Vector3d>& normals);
+/// Two probes per sample, P_i -+ d_i n_i, and w there: the winding-outlier test's jump
+/// (FindWindingOutliers, samples.h) and the orientation repair's level (FlipInvertedParts,
+/// normals.h). d_i = min(s_i / 2, 0.4 t_i): s_i the distance to the 16th nearest other sample,
+/// t_i to the nearest of those 16 whose normal is opposite (n . n_j < -0.5: a thin wall's other
+/// side, which a probe must not pass), fixed by the normals given here; areas as SampleAreas with
+/// k = 16. One k-d tree gives both and an order that keeps neighbours' probes in one batch; each
+/// call then takes the current normals (same size; a flip moves its probes to the other side).
+/// With 16 samples or fewer, or normals of another size, nothing is measured (jumps 1, levels
+/// 1/2). `positions` must outlive the object. Host only, non-RT; parallel, deterministic.
+class SampleProbes {
+ public:
+  SampleProbes(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals);
+  /// J_i = w(P_i - d_i n_i) - w(P_i + d_i n_i), the sample's own dipole counted as the disc of
+  /// area a_i it stands for (a dipole's 1/d^2 would decide the jump alone at small d): about 1 on
+  /// a surface sampled with the right areas (a sphere: within 0.15, median 0.95); near 0 where the
+  /// sample disagrees with the others.
+  std::vector<double> Jumps(const std::vector<Eigen::Vector3d>& normals) const;
+  /// (w(P_i - d_i n_i) + w(P_i + d_i n_i)) / 2: about +1/2 on a closed surface oriented outward
+  /// (w 1 inside, 0 outside), -1/2 on a closed part of it oriented inward as a whole (w -1 inside
+  /// that part), 0 on a flat open sheet, between 0 and +1/2 on an open scan seen from outside
+  /// (knot1, fandisk, sphere, bull, cow, femur, elk, camel scanned from 1, 3 or 6 views or without
+  /// their -z side: mean 0.07-0.45; mean -0.15 for a one-view scan oriented inward).
+  std::vector<double> Levels(const std::vector<Eigen::Vector3d>& normals) const;
+  /// a_i (SampleAreas, k = 16); empty when nothing is measured.
+  const std::vector<double>& areas() const { return areas_; }
 
-/// The level of each sample, (w(P_i - d_i n_i) + w(P_i + d_i n_i)) / 2 with d_i = `offsets`
-/// (ProbeOffsets): about +1/2 on a closed surface oriented outward (w 1 inside, 0 outside), -1/2
-/// on a closed part of it oriented inward as a whole (w -1 inside that part), 0 on a flat open
-/// sheet, between 0 and +1/2 on an open scan seen from outside (knot1, fandisk, sphere, bull, cow,
-/// femur, elk, camel scanned from 1, 3 or 6 views or without their -z side: mean 0.07-0.45;
-/// mean -0.15 for a one-view scan oriented inward). 1/2 where d_i is 0. `areas` as for
-/// WindingNumber. Same size as `positions`. Parallel.
-std::vector<double> SampleLevels(const std::vector<Eigen::Vector3d>& positions,
-                                 const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& areas,
-                                 const std::vector<double>& offsets);
-
-/// The jump of w across each sample along its normal (FindWindingOutliers, samples.h):
-///   J_i = w(P_i - d_i n_i) - w(P_i + d_i n_i),  d_i from ProbeOffsets,
-/// the sample's own dipole counted as the disc of area a_i it stands for. About 1 on a surface sampled
-/// with the right areas; 0 where the sample disagrees with the others. `normals` unit, `areas`
-/// (SampleAreas with k = 16), same size as `positions` (more than 16); else all 1. Parallel.
-std::vector<double> SampleJumps(const std::vector<Eigen::Vector3d>& positions,
-                                const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& areas);
+ private:
+  static constexpr std::size_t kNeighbours = 16;
+  // w at each sample's inside and outside probe (0 where d_i is 0).
+  void Winding(const std::vector<Eigen::Vector3d>& normals, std::vector<double>& inside,
+               std::vector<double>& outside) const;
+  const std::vector<Eigen::Vector3d>& positions_;
+  std::vector<double> areas_, offsets_;
+  std::vector<std::size_t> order_;  // the k-d tree's leaf order
+};
 
 /// w(q) summed over every sample: O(n) per query, the reference for the tree.
 double WindingNumberBruteForce(const std::vector<Eigen::Vector3d>& positions,
