@@ -394,6 +394,42 @@ TEST(FlipInvertedParts, AThinClosedPlateKeepsBothSides) {
   EXPECT_EQ(parts, 0u);
 }
 
+// A cube 2 x 2 x 2 (samples 0.05 apart) with a fin 1 x 1 x 0.04 out of its +x face: the fin's
+// two faces lie 0.8 spacings apart, each other's nearest samples (the bull's ears and horns).
+Oriented CubeWithFin() {
+  Oriented shape = Cube(40);
+  for (int a = 0; a < 20; ++a)
+    for (int b = 0; b < 20; ++b)
+      for (const double side : {-1.0, 1.0}) {
+        shape.positions.emplace_back(1.0 + 0.05 * (a + 0.5), -0.5 + 0.05 * (b + 0.5), 0.02 * side);
+        shape.normals.emplace_back(0, 0, side);
+      }
+  return shape;
+}
+
+TEST(FlipSheetsByWinding, TheSideOfAThinFinThatTookTheOtherSidesSignIsTurned) {
+  const Oriented shape = CubeWithFin();
+  std::vector<V3> normals = shape.normals;
+  std::size_t sheets = 9;
+  // Consistent signs: nothing to turn.
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 0u);
+  EXPECT_EQ(sheets, 0u);
+  EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
+  // The fin's underside given its top's sign (what an orientation across the wall does).
+  for (std::size_t i = 0; i < normals.size(); ++i)
+    if (shape.positions[i].x() > 1.0 && shape.normals[i].z() < 0) normals[i] = -normals[i];
+  ASSERT_EQ(CountAgainst(normals, shape.normals), 400u);
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 400u);
+  EXPECT_EQ(sheets, 1u);
+  EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
+  // Or the top given the underside's sign: the top is turned instead.
+  normals = shape.normals;
+  for (std::size_t i = 0; i < normals.size(); ++i)
+    if (shape.positions[i].x() > 1.0 && shape.normals[i].z() > 0) normals[i] = -normals[i];
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 400u);
+  EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
+}
+
 TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
   const Oriented cube = Cube(20);  // spacing 0.1
   std::vector<V3> normals;

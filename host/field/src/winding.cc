@@ -196,6 +196,24 @@ void SampleProbes::Winding(const std::vector<V3>& normals, std::vector<double>& 
   });
 }
 
+double SampleProbes::OwnDisc(double a, double d) { return 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi)); }
+
+void SampleProbes::InsideOutside(const std::vector<V3>& normals, std::vector<double>& inside,
+                                 std::vector<double>& outside) const {
+  const std::size_t n = positions_.size();
+  inside.assign(n, 0.0);
+  outside.assign(n, 0.0);
+  if (order_.empty() || normals.size() != n) return;
+  Winding(normals, inside, outside);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = offsets_[i];
+    if (!(d > 0)) continue;
+    const double own = OwnDisc(areas_[i], d) - areas_[i] * kInv4Pi / (d * d);  // the disc for the point dipole
+    inside[i] += own;
+    outside[i] -= own;
+  }
+}
+
 std::vector<double> SampleProbes::Jumps(const std::vector<V3>& normals) const {
   const std::size_t n = positions_.size();
   std::vector<double> jump(n, 1.0);
@@ -207,7 +225,7 @@ std::vector<double> SampleProbes::Jumps(const std::vector<V3>& normals) const {
     if (!(d > 0)) continue;
     const double a = areas_[i];
     const double own_dipole = a * kInv4Pi / (d * d);  // at each probe, +inside -outside
-    const double own_disc = 0.5 * (1.0 - d / std::sqrt(d * d + a / std::numbers::pi));
+    const double own_disc = OwnDisc(a, d);
     jump[i] = inside[i] - outside[i] - 2.0 * own_dipole + 2.0 * own_disc;
   }
   return jump;

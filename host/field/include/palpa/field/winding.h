@@ -54,8 +54,17 @@ class SampleProbes {
   /// (knot1, fandisk, sphere, bull, cow, femur, elk, camel scanned from 1, 3 or 6 views or without
   /// their -z side: mean 0.07-0.45; mean -0.15 for a one-view scan oriented inward).
   std::vector<double> Levels(const std::vector<Eigen::Vector3d>& normals) const;
+  /// w at P_i - d_i n_i (`inside`) and at P_i + d_i n_i (`outside`), size n, the sample's own
+  /// dipole counted as the disc of area a_i (as Jumps); 0 where d_i is 0. For the sheet-sign
+  /// energy (FlipSheetsByWinding, normals.h), which moves w by whole sheets' terms.
+  void InsideOutside(const std::vector<Eigen::Vector3d>& normals, std::vector<double>& inside,
+                     std::vector<double>& outside) const;
   /// a_i (SampleAreas, k = 16); empty when nothing is measured.
   const std::vector<double>& areas() const { return areas_; }
+  /// d_i, the probes' distance from P_i (model units); 0 where the sample has no probes.
+  const std::vector<double>& offsets() const { return offsets_; }
+  /// The disc of area a seen from a distance d along its axis: its w, 1/2 (1 - d / sqrt(d^2 + a / pi)).
+  static double OwnDisc(double a, double d);
 
  private:
   static constexpr std::size_t kNeighbours = 16;
