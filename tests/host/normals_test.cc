@@ -410,23 +410,25 @@ Oriented CubeWithFin() {
 TEST(FlipSheetsByWinding, TheSideOfAThinFinThatTookTheOtherSidesSignIsTurned) {
   const Oriented shape = CubeWithFin();
   std::vector<V3> normals = shape.normals;
+  const std::vector<std::uint8_t> all(normals.size(), 1);
   std::size_t sheets = 9;
   // Consistent signs: nothing to turn.
-  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 0u);
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, all, sheets), 0u);
   EXPECT_EQ(sheets, 0u);
   EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
   // The fin's underside given its top's sign (what an orientation across the wall does).
   for (std::size_t i = 0; i < normals.size(); ++i)
     if (shape.positions[i].x() > 1.0 && shape.normals[i].z() < 0) normals[i] = -normals[i];
   ASSERT_EQ(CountAgainst(normals, shape.normals), 400u);
-  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 400u);
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, std::vector<std::uint8_t>(normals.size(), 0), sheets), 0u);
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, all, sheets), 400u);
   EXPECT_EQ(sheets, 1u);
   EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
   // Or the top given the underside's sign: the top is turned instead.
   normals = shape.normals;
   for (std::size_t i = 0; i < normals.size(); ++i)
     if (shape.positions[i].x() > 1.0 && shape.normals[i].z() > 0) normals[i] = -normals[i];
-  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, sheets), 400u);
+  EXPECT_EQ(FlipSheetsByWinding(shape.positions, normals, all, sheets), 400u);
   EXPECT_EQ(CountAgainst(normals, shape.normals), 0u);
 }
 

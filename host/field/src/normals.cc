@@ -390,11 +390,12 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
 // unbounded), and one such probe must not outweigh a sheet (a fin 0.8 spacings thick: both of its
 // sides' flips raised the energy without the cap, its wrong side's lowers it with).
 double Miss(double e) { return std::min(e * e, 1.0); }
-std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3>& normals, std::size_t& sheets) {
+std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3>& normals,
+                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets) {
   sheets = 0;
   const std::size_t n = positions.size();
   constexpr std::size_t kProbeNeighbours = 16;
-  if (n <= kProbeNeighbours || normals.size() != n) return 0;
+  if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
   const SampleProbes probes(positions, normals);
   std::vector<double> inside, outside;
   probes.InsideOutside(normals, inside, outside);
@@ -440,7 +441,7 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   std::vector<Sheet> candidates;
   const std::size_t largest = std::min<std::size_t>(kSheetMostSamples, n / 8);
   for (std::vector<std::uint32_t>& m : members) {
-    if (m.empty() || m.size() > largest) continue;
+    if (m.empty() || m.size() > largest || eligible[m.front()] == 0) continue;
     Sheet sheet;
     sheet.centre = V3::Zero();
     for (const std::uint32_t i : m) sheet.centre += positions[i];
@@ -707,8 +708,14 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   // leave the tangent planes, sheets break into single samples whose probes lie in the noise: a
   // sphere with noise of half a spacing had 183 normals turned inward (NoisyDenseBarePositions...),
   // CGAL's sphere_20k (noise 1.6 spacings) 1,750 of 21,000.
-  if (given_are_jet_lines && report.neighbours == kCleanNormalNeighbours)
-    report.sheet_samples = FlipSheetsByWinding(positions, normals, report.sheets);
+  // Closed pieces only: an open sheet's w is near 1/2 on both sides, so the energy's 1 inside and
+  // 0 outside are no truth there (CGAL's b9_training, an aerial scan of 6 open pieces: 1,068 of
+  // 9,579 normals turned, and the closure's area halved).
+  if (given_are_jet_lines && report.neighbours == kCleanNormalNeighbours && report.open_components < pieces) {
+    std::vector<std::uint8_t> closed(n, 0);
+    for (std::size_t i = 0; i < n; ++i) closed[i] = flux[component[i]].norm() < 0.2 * area[component[i]] ? 1 : 0;
+    report.sheet_samples = FlipSheetsByWinding(positions, normals, closed, report.sheets);
+  }
   report.flipped = 0;
   for (std::size_t i = 0; i < n; ++i)  // `given` is `normals`: the file's is +-oriented[i] by keep[i]
     if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;

@@ -144,12 +144,14 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// twice their radius plus 6 d_i) flip, best first, apart from one another, up to 32 rounds.
 /// The cap: a probe beside another sample reads its 1/r^2 point dipole. OrientNormals runs it on
 /// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours): on
-/// noisy ones sheets break into single samples whose probes lie in the noise.
+/// noisy ones sheets break into single samples whose probes lie in the noise. `eligible` (size n,
+/// 0 or 1): the samples whose sheets may flip (OrientNormals: those of closed pieces; every
+/// sample's dipole counts in w).
 /// CGAL's bull, 5,000 samples, normals stripped: 136 signs against the exact normals -> 36, wrong
 /// sign in the band 1.84x -> 1.38x the exact normals' (docs/field-methods.md § Normals). Returns
 /// the samples flipped; `sheets` the sheets. Unit normals in, same lines out. Deterministic.
 std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
-                                std::size_t& sheets);
+                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets);
 
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
