@@ -85,6 +85,30 @@ struct UnionFind {
   }
 };
 
+// The K nearest other samples of each sample (fewer found: the sample itself fills the row), from
+// a k-d tree with leaves of 10 (ties at the Kth distance follow the tree: kRangeLeaf's note).
+template <std::size_t K>
+std::vector<std::array<std::uint32_t, K>> NearestGraph(const detail::KdTree& tree, const std::vector<V3>& positions) {
+  std::vector<std::array<std::uint32_t, K>> graph(positions.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
+    std::array<std::size_t, K + 1> idx{};
+    std::array<double, K + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), K + 1, idx.data(), d2.data());
+      std::size_t e = 0;
+      for (std::size_t m = 0; m < got && e < K; ++m)
+        if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
+      for (; e < K; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
+    }
+  });
+  return graph;
+}
+template <std::size_t K>
+std::vector<std::array<std::uint32_t, K>> NearestGraph(const std::vector<V3>& positions) {
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  return NearestGraph<K>(tree, positions);
+}
 }  // namespace
 
 int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
@@ -288,22 +312,7 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
   if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
   // The probes stay where the first normals put them (a flip moves a probe to the other side).
   const SampleProbes probes(positions, normals);
-  std::vector<std::array<std::uint32_t, kInvertedGraph>> graph(n);
-  {
-    const detail::PointCloud cloud{&positions};
-    const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-      std::array<std::size_t, kInvertedGraph + 1> idx{};
-      std::array<double, kInvertedGraph + 1> d2{};
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        const std::size_t got = tree.knnSearch(positions[i].data(), kInvertedGraph + 1, idx.data(), d2.data());
-        std::size_t e = 0;
-        for (std::size_t m = 0; m < got && e < kInvertedGraph; ++m)
-          if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
-        for (; e < kInvertedGraph; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
-      }
-    });
-  }
+  const std::vector<std::array<std::uint32_t, kInvertedGraph>> graph = NearestGraph<kInvertedGraph>(positions);
   std::vector<double> level;
   const auto measure = [&] { level = probes.Levels(normals); };
   std::vector<std::uint8_t> changed(n, 0);  // the parity of each sample's flips
@@ -411,18 +420,7 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   // sheet, or the two sides of a thin wall, separate them).
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  std::vector<std::array<std::uint32_t, kSheetGraph>> graph(n);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::array<std::size_t, kSheetGraph + 1> idx{};
-    std::array<double, kSheetGraph + 1> d2{};
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), kSheetGraph + 1, idx.data(), d2.data());
-      std::size_t e = 0;
-      for (std::size_t m = 0; m < got && e < kSheetGraph; ++m)
-        if (idx[m] != i) graph[i][e++] = static_cast<std::uint32_t>(idx[m]);
-      for (; e < kSheetGraph; ++e) graph[i][e] = static_cast<std::uint32_t>(i);
-    }
-  });
+  const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
   const double min_dot = std::cos(kSheetAngleDeg * std::numbers::pi / 180.0);
   UnionFind joined(n);
   for (std::size_t i = 0; i < n; ++i)
