@@ -109,6 +109,11 @@ std::vector<std::array<std::uint32_t, K>> NearestGraph(const std::vector<V3>& po
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   return NearestGraph<K>(tree, positions);
 }
+// A probe's miss, capped: a probe beside another sample reads that sample's point dipole (1/r^2,
+// unbounded), and one such probe must not outweigh a sheet (a fin 0.8 spacings thick: both of its
+// sides' flips raised the energy without the cap, its wrong side's lowers it with).
+double Miss(double e) { return std::min(e * e, 1.0); }
+
 }  // namespace
 
 int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals) {
@@ -308,10 +313,10 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
                               const std::vector<std::uint8_t>& eligible, std::size_t& parts) {
   parts = 0;
   const std::size_t n = positions.size();
-  constexpr std::size_t kProbeNeighbours = 16;
-  if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
+  if (normals.size() != n || eligible.size() != n) return 0;
   // The probes stay where the first normals put them (a flip moves a probe to the other side).
   const SampleProbes probes(positions, normals);
+  if (!probes.measured()) return 0;
   const std::vector<std::array<std::uint32_t, kInvertedGraph>> graph = NearestGraph<kInvertedGraph>(positions);
   std::vector<double> level;
   const auto measure = [&] { level = probes.Levels(normals); };
@@ -399,17 +404,13 @@ std::size_t FlipInvertedParts(const std::vector<V3>& positions, std::vector<V3>&
   return flipped;
 }
 
-// A probe's miss, capped: a probe beside another sample reads that sample's point dipole (1/r^2,
-// unbounded), and one such probe must not outweigh a sheet (a fin 0.8 spacings thick: both of its
-// sides' flips raised the energy without the cap, its wrong side's lowers it with).
-double Miss(double e) { return std::min(e * e, 1.0); }
 std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3>& normals,
                                 const std::vector<std::uint8_t>& eligible, std::size_t& sheets) {
   sheets = 0;
   const std::size_t n = positions.size();
-  constexpr std::size_t kProbeNeighbours = 16;
-  if (n <= kProbeNeighbours || normals.size() != n || eligible.size() != n) return 0;
+  if (normals.size() != n || eligible.size() != n) return 0;
   const SampleProbes probes(positions, normals);
+  if (!probes.measured()) return 0;
   std::vector<double> inside, outside;
   probes.InsideOutside(normals, inside, outside);
   const std::vector<double>& areas = probes.areas();

@@ -59,6 +59,8 @@ class SampleProbes {
   /// energy (FlipSheetsByWinding, normals.h), which moves w by whole sheets' terms.
   void InsideOutside(const std::vector<Eigen::Vector3d>& normals, std::vector<double>& inside,
                      std::vector<double>& outside) const;
+  /// Whether the probes were placed (more than 16 samples, normals of the same size).
+  bool measured() const { return !areas_.empty(); }
   /// a_i (SampleAreas, k = 16); empty when nothing is measured.
   const std::vector<double>& areas() const { return areas_; }
   /// d_i, the probes' distance from P_i (model units); 0 where the sample has no probes.
