@@ -141,7 +141,8 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// 1)), each sample's probes (SampleProbes) wanting 1 inside and 0 outside; a sheet's flip adds
 /// -2 w_sheet at every probe (its own samples' as discs) and swaps its samples' targets. Sheets
 /// of at most 4,096 samples and n / 8 whose flip lowers the energy (measured on the probes within
-/// twice their radius plus 6 d_i) flip, best first, apart from one another, up to 32 rounds.
+/// twice their radius plus 6 d_i) flip, best first, apart from one another, round after round
+/// until no flip lowers it (each sheet at most once; a round re-scores only the sheets a flip reached).
 /// The cap: a probe beside another sample reads its 1/r^2 point dipole. OrientNormals runs it on
 /// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours): on
 /// noisy ones sheets break into single samples whose probes lie in the noise. `eligible` (size n,
