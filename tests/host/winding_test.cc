@@ -62,6 +62,34 @@ TEST(SampleProbes, JumpsOneAcrossASphereAndNearZeroAtAFlippedNormal) {
   for (const double j : SampleProbes(few, few_n).Jumps(few_n)) EXPECT_EQ(j, 1.0);
 }
 
+TEST(SampleProbes, EitherSignWallsKeepProbesOnTheirSideOfAWallWhoseSidesTookOneSign) {
+  // Two faces of a plate 1.75 spacings thick (samples 0.08 apart, faces at z = -+0.07), both
+  // given +z (the bottom one wrong, as an orientation across the wall leaves it). The 16th
+  // neighbour lies 0.18 away, so a probe at half of it (0.09) passes the wall's middle (0.07) into
+  // the other side's field; counting the other side as a wall whatever its sign keeps it within
+  // 0.4 x 0.14. With the signs right both rules agree (the other side is opposite already).
+  std::vector<V3> p, wrong, right;
+  for (int a = 0; a < 30; ++a)
+    for (int b = 0; b < 30; ++b)
+      for (const double side : {-1.0, 1.0}) {
+        p.emplace_back(0.08 * a, 0.08 * b, 0.07 * side);
+        wrong.emplace_back(0, 0, 1);
+        right.emplace_back(0, 0, side);
+      }
+  const std::vector<double> opposite = SampleProbes(p, wrong).offsets();
+  const std::vector<double> either = SampleProbes(p, wrong, SampleProbes::Walls::kEitherSign).offsets();
+  const std::vector<double> opposite_right = SampleProbes(p, right).offsets();
+  const std::vector<double> either_right = SampleProbes(p, right, SampleProbes::Walls::kEitherSign).offsets();
+  ASSERT_EQ(either.size(), p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_GT(opposite[i], 0.075) << i;
+    EXPECT_GT(either[i], 0.0) << i;
+    EXPECT_LE(either[i], 0.4 * 0.14 + 1e-12) << i;
+    EXPECT_EQ(either_right[i], opposite_right[i]) << i;
+    EXPECT_LE(opposite_right[i], 0.4 * 0.14 + 1e-12) << i;
+  }
+}
+
 // The analytic answer: 1 strictly inside a closed surface, 0 outside. Sampled, w deviates near the
 // samples (each is a singular dipole) and by the area estimate's bias; a few spacings away it is
 // within 0.1 of the answer, and the tree matches the brute-force sum to 0.05.

@@ -409,7 +409,7 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   sheets = 0;
   const std::size_t n = positions.size();
   if (normals.size() != n || eligible.size() != n) return 0;
-  const SampleProbes probes(positions, normals);
+  const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign);
   if (!probes.measured()) return 0;
   std::vector<double> inside, outside;
   probes.InsideOutside(normals, inside, outside);

@@ -143,7 +143,8 @@ std::vector<double> SampleAreas(const std::vector<V3>& positions, int k) {
   return areas;
 }
 
-SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V3>& normals) : positions_(positions) {
+SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V3>& normals, Walls walls)
+    : positions_(positions) {
   const std::size_t n = positions.size();
   if (n <= kNeighbours || normals.size() != n) return;
   areas_.assign(n, 0.0);
@@ -157,11 +158,21 @@ SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V
       const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
       areas_[i] = std::numbers::pi * d2[got - 1] / static_cast<double>(got - 1);  // as SampleAreas
       double d = 0.5 * std::sqrt(d2[got - 1]);
-      for (std::size_t m = 0; m < got; ++m)
-        if (idx[m] != i && normals[idx[m]].dot(normals[i]) < -0.5) {
+      const double nearest2 = got > 1 ? d2[1] : 0.0;  // idx[0] is the sample itself
+      for (std::size_t m = 0; m < got; ++m) {
+        if (idx[m] == i) continue;
+        const double facing = normals[idx[m]].dot(normals[i]);
+        // Not a wall thinner than the spacing (its other side the nearest samples): a probe held
+        // within 0.4 of it would read the neighbours' 1/r^2 dipoles, and the far probes turn such
+        // fins right (FlipSheetsByWinding's tests).
+        const bool stacked = walls == Walls::kEitherSign && std::abs(facing) > 0.5 &&
+                             d2[m] > kStackedFromNearest * kStackedFromNearest * nearest2 &&
+                             std::abs(normals[i].dot(positions[idx[m]] - positions[i])) > 0.5 * std::sqrt(d2[m]);
+        if (facing < -0.5 || stacked) {
           d = std::min(d, 0.4 * std::sqrt(d2[m]));
           break;
         }
+      }
       offsets_[i] = d;
     }
   });

@@ -138,7 +138,7 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// the samples joined in the 10-nearest graph by normals within 30 degrees, signs included, and
 /// chords within asin(0.25) of both tangent planes, so a wall's two sides and a sign boundary
 /// separate sheets. Energy: sum_i a_i (min((w(P_i - d_i n_i) - 1)^2, 1) + min(w(P_i + d_i n_i)^2,
-/// 1)), each sample's probes (SampleProbes) wanting 1 inside and 0 outside; a sheet's flip adds
+/// 1)), each sample's probes (SampleProbes, Walls::kEitherSign) wanting 1 inside and 0 outside; a sheet's flip adds
 /// -2 w_sheet at every probe (its own samples' as discs) and swaps its samples' targets. Sheets
 /// of at most 4,096 samples and n / 8 whose flip lowers the energy (measured on the probes within
 /// twice their radius plus 6 d_i) flip, best first, apart from one another, round after round

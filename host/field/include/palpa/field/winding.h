@@ -42,7 +42,18 @@ std::vector<double> SampleAreas(const std::vector<Eigen::Vector3d>& positions, i
 /// 1/2). `positions` must outlive the object. Host only, non-RT; parallel, deterministic.
 class SampleProbes {
  public:
-  SampleProbes(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals);
+  /// Which neighbours count as a wall's other side for t_i.
+  enum class Walls {
+    kOppositeNormals,  ///< n . n_j < -0.5 (as above)
+    /// also a neighbour stacked along the normal whatever its sign: |n . n_j| > 0.5, the chord
+    /// more than 30 degrees off the tangent plane, and farther than 1.5 x the nearest sample (a
+    /// wall thinner than that keeps the far probes). For sign searches, where a wall's two sides may
+    /// hold one sign: the elk's palms (2-3 spacings thick), whose wrong side's probes otherwise
+    /// reach past the wall's middle and read the flip of that side as a loss.
+    kEitherSign,
+  };
+  SampleProbes(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
+               Walls walls = Walls::kOppositeNormals);
   /// J_i = w(P_i - d_i n_i) - w(P_i + d_i n_i), the sample's own dipole counted as the disc of
   /// area a_i it stands for (a dipole's 1/d^2 would decide the jump alone at small d): about 1 on
   /// a surface sampled with the right areas (a sphere: within 0.15, median 0.95); near 0 where the
@@ -70,6 +81,8 @@ class SampleProbes {
 
  private:
   static constexpr std::size_t kNeighbours = 16;
+  // Walls::kEitherSign counts a stacked neighbour only beyond this many nearest-sample distances.
+  static constexpr double kStackedFromNearest = 1.5;
   // w at each sample's inside and outside probe (0 where d_i is 0).
   void Winding(const std::vector<Eigen::Vector3d>& normals, std::vector<double>& inside,
                std::vector<double>& outside) const;
