@@ -481,10 +481,6 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
     }
     return w;
   };
-  struct Change {
-    double energy = 0;
-    std::vector<std::pair<std::size_t, double>> reached;  // (sample, w_Q at its probes: inside, outside)
-  };
   std::size_t flipped = 0;
   std::vector<std::uint8_t> done(candidates.size(), 0);
   // A sheet's gain depends only on the probes within its reach and on its own samples' sides, so
@@ -492,6 +488,10 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   // every sheet stopped the elk's antlers half-way (the elk, 3 draws: 350, 2,868 and 1,107
   // far-wrong nodes after 32 rounds, 8, 50 and 30 at convergence); every round flips at least one
   // sheet, once, so at most candidates.size() rounds.
+  // Whether two sheets' probe balls meet: flipping one changes the other's gain.
+  const auto reaches_meet = [&](std::size_t a, std::size_t b) {
+    return (candidates[a].centre - candidates[b].centre).norm() <= candidates[a].reach + candidates[b].reach;
+  };
   std::vector<double> gain(candidates.size(), 0.0);
   std::vector<std::uint8_t> stale(candidates.size(), 1);
   for (;;) {
@@ -528,11 +528,8 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
               [&](std::size_t a, std::size_t b) { return gain[a] != gain[b] ? gain[a] < gain[b] : a < b; });
     std::vector<std::size_t> taken;
     for (const std::size_t c : order) {
-      bool apart = true;
-      for (const std::size_t t : taken)
-        apart =
-            apart && (candidates[c].centre - candidates[t].centre).norm() > candidates[c].reach + candidates[t].reach;
-      if (apart) taken.push_back(c);
+      if (std::none_of(taken.begin(), taken.end(), [&](std::size_t t) { return reaches_meet(c, t); }))
+        taken.push_back(c);
     }
     for (const std::size_t c : taken) {
       const Sheet& sheet = candidates[c];
@@ -552,10 +549,8 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
       flipped += sheet.samples.size();
     }
     for (std::size_t c = 0; c < candidates.size(); ++c)
-      for (const std::size_t t : taken)
-        if (done[c] == 0 &&
-            (candidates[c].centre - candidates[t].centre).norm() <= candidates[c].reach + candidates[t].reach)
-          stale[c] = 1;
+      if (done[c] == 0 && std::any_of(taken.begin(), taken.end(), [&](std::size_t t) { return reaches_meet(c, t); }))
+        stale[c] = 1;
   }
   for (std::size_t i = 0; i < n; ++i)
     if (side[i] < 0) normals[i] = -normals[i];

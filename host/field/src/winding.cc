@@ -158,9 +158,10 @@ SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V
       const std::size_t got = tree.knnSearch(positions[i].data(), kNeighbours + 1, idx.data(), d2.data());
       areas_[i] = std::numbers::pi * d2[got - 1] / static_cast<double>(got - 1);  // as SampleAreas
       double d = 0.5 * std::sqrt(d2[got - 1]);
-      const double nearest2 = got > 1 ? d2[1] : 0.0;  // idx[0] is the sample itself
+      double nearest2 = 0.0;  // the nearest other sample's squared distance
       for (std::size_t m = 0; m < got; ++m) {
         if (idx[m] == i) continue;
+        if (nearest2 == 0.0) nearest2 = d2[m];
         const double facing = normals[idx[m]].dot(normals[i]);
         // Not a wall thinner than the spacing (its other side the nearest samples): a probe held
         // within 0.4 of it would read the neighbours' 1/r^2 dipoles, and the far probes turn such
