@@ -50,6 +50,24 @@ constexpr double kWindingClear = 0.2;
 // closed mesh's thin parts, where w outside reaches 0.1-0.25 (bull, 1,000 samples or estimated
 // normals: 102 -> 147-613 and 6 -> 67-4,340 far-wrong nodes at 0.25-0.1).
 constexpr double kBallClosingWinding = 0.5 - kWindingClear;
+// Beyond the trust distance, an unclear w is compared with the surface's own level there, the
+// mean of SampleProbes::Levels over the node's kLevelNeighbours nearest samples, within
+// [kBallClosingWinding, 1/2]: a sparse set's w reads low (levels 0.42-0.44 median at 500-1,000
+// samples of knot1 and fandisk), so 1/2 cut holes in thin tubes, while the local estimate alone
+// carried faces' patches on over unsampled notches and part ends.
+constexpr std::size_t kLevelNeighbours = 8;
+// ... and decides only where w's surface at that level lies farther than the estimate's and than
+// this (voxels): nearer, the two agree to the grid's resolution and the estimate, which passes
+// through the samples, is the better (sphere926 at 300 cells: without it, max error 0.04 -> 0.27
+// voxel near the surface between its 926 samples).
+constexpr double kLevelMinVoxels = 1.0;
+// A set is closed when its normals' flux |sum_i a_i n_i| is under kClosedFlux of its area (0 for
+// a closed surface, by the divergence theorem: 0.003-0.078 on 40 sparse and outlier draws of 8
+// closed meshes, 0.14-0.51 on their open and range scans; FlipSheetsByWinding's gate, normals.cc)
+// and its rim samples (RimSamples) are fewer than kClosedRims sqrt(n) (sparse closed sets 0-5,
+// open and range scans 0.8-3.3 sqrt(n); oni, open at its neck but of flux 0.067, 29 = 0.77 sqrt(n)).
+constexpr double kClosedFlux = 0.1;
+constexpr double kClosedRims = 0.4;
 // Inner balls tried per query (those of the samples nearest it).
 constexpr std::size_t kClosingBalls = 16;
 // Beside a rim (RimSamples) the inner balls close down to this w.
@@ -720,6 +738,15 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
   return rim;
 }
 
+// The surface's own level of w near a point (issue 20): the mean of SampleProbes::Levels over the
+// given samples (the point's nearest), within [kBallClosingWinding, 1/2]; 1/2 with none.
+double LocalLevel(const std::vector<double>& levels, std::span<const std::size_t> nearest) {
+  if (nearest.empty()) return 0.5;
+  double sum = 0.0;
+  for (const std::size_t i : nearest) sum += levels[i];
+  return std::clamp(sum / static_cast<double>(nearest.size()), kBallClosingWinding, 0.5);
+}
+
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
 // or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
 // samples nearest it. Unclear is w >= kBallClosingWinding, or w >= kRimClosingWinding where the
@@ -827,7 +854,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
   constexpr int kB = SparseField::kBrick;
-  const WindingNumber winding(positions, normals, SampleAreas(positions, kAreaNeighbours));
+  const std::vector<double> areas = SampleAreas(positions, kAreaNeighbours);
+  const WindingNumber winding(positions, normals, areas);
   const auto& bd = field.brick_dims();
   const std::array<std::size_t, 3> cd = {static_cast<std::size_t>(bd[0]) + 1, static_cast<std::size_t>(bd[1]) + 1,
                                          static_cast<std::size_t>(bd[2]) + 1};
@@ -1000,6 +1028,20 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   const PointCloud guard_cloud{&guard_positions};
   const KdTree guards(3, guard_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
+  // The surface's own w level at each sample (1/2 on a densely sampled closed surface, lower on a
+  // sparse or thin part), for the unclear nodes below; on closed sets only (an open side's
+  // closure has w below the sampled surface's level all over).
+  V3 flux = V3::Zero();
+  double area = 0.0;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    flux += areas[i] * normals[i];
+    area += areas[i];
+  }
+  const auto rims = static_cast<double>(std::count(rim.begin(), rim.end(), std::uint8_t{1}));
+  const bool closed_set =
+      flux.norm() < kClosedFlux * area && rims < kClosedRims * std::sqrt(static_cast<double>(positions.size()));
+  const std::vector<double> levels =
+      closed_set ? SampleProbes(positions, normals).Levels(normals) : std::vector<double>{};
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
@@ -1063,6 +1105,35 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
+          // w unclear, the estimate inside, a closed set (kClosedFlux, kClosedRims) and no rim
+          // sample among the nearest (beside its few rims, a part's unsampled end, the rims'
+          // balls close as on an open side). Where w lies below the
+          // surface's own level here (LocalLevel) and w's surface at that level is farther from
+          // the node than the estimate's own and than kLevelMinVoxels (first order: (level - w) /
+          // |grad w|, central differences over a voxel), the node is outside: the estimate
+          // carried patches and balls on past their last samples (between a sparse tube's
+          // strands, a part's end).
+          std::array<std::size_t, kLevelNeighbours> near_idx{};
+          std::array<double, kLevelNeighbours> near_d2{};
+          const std::size_t got =
+              closed_set && x <= 0.0f ? wide.knnSearch(p.data(), kLevelNeighbours, near_idx.data(), near_d2.data()) : 0;
+          const double level = LocalLevel(levels, std::span(near_idx.data(), got));
+          bool near_rim = false;
+          for (std::size_t k = 0; k < got; ++k) near_rim = near_rim || rim[near_idx[k]] != 0;
+          if (got > 0 && w < level && !near_rim) {
+            V3 grad;
+            for (Eigen::Index axis = 0; axis < 3; ++axis) {
+              const V3 step = h * V3::Unit(axis);
+              grad[axis] = 0.5 * (winding(V3(p + step)) - winding(V3(p - step)));
+            }
+            const double nearest = std::sqrt(near_d2[0]) / h;
+            const double to_level = grad.norm() > 1e-12 ? (level - w) / grad.norm() : nearest;
+            if (to_level > std::max(-static_cast<double>(x), kLevelMinVoxels)) {
+              x = std::max(1e-6f, std::min(band, static_cast<float>(std::min(to_level, nearest))));
+              ++local;
+              continue;
+            }
+          }
           // w unclear, the estimate inside: a guard (a dropped sample) nearer than every sample
           // that the node lies in front of, beyond trust, decides outside. Such a guard is, on
           // a sparse set, the only sample of a part's end (a hoof's sole), whose neighbours'
