@@ -50,11 +50,11 @@ constexpr double kWindingClear = 0.2;
 // closed mesh's thin parts, where w outside reaches 0.1-0.25 (bull, 1,000 samples or estimated
 // normals: 102 -> 147-613 and 6 -> 67-4,340 far-wrong nodes at 0.25-0.1).
 constexpr double kBallClosingWinding = 0.5 - kWindingClear;
-// Beyond the trust distance, an unclear w is compared with the surface's own level there, the
-// mean of SampleProbes::Levels over the node's kLevelNeighbours nearest samples, within
-// [kBallClosingWinding, 1/2]: a sparse set's w reads low (levels 0.42-0.44 median at 500-1,000
-// samples of knot1 and fandisk), so 1/2 cut holes in thin tubes, while the local estimate alone
-// carried faces' patches on over unsampled notches and part ends.
+// Beyond the trust distance, an unclear w below 1/2 where the estimate is inside is compared with
+// the surface's own level there, the mean of SampleProbes::Levels over the node's
+// kLevelNeighbours nearest samples, within [kBallClosingWinding, 1/2]: a sparse set's w reads low
+// (levels 0.42-0.44 median at 500-1,000 samples of knot1 and fandisk), so 1/2 cut holes in thin
+// tubes, while the local estimate alone carried patches on into gaps no sample lies in.
 constexpr std::size_t kLevelNeighbours = 8;
 // ... and decides only where w's surface at that level lies farther than the estimate's and than
 // this (voxels): nearer, the two agree to the grid's resolution and the estimate, which passes
@@ -1105,31 +1105,35 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
-          // w unclear, the estimate inside, a closed set (kClosedFlux, kClosedRims) and no rim
-          // sample among the nearest (beside its few rims, a part's unsampled end, the rims'
-          // balls close as on an open side). Where w lies below the
-          // surface's own level here (LocalLevel) and w's surface at that level is farther from
-          // the node than the estimate's own and than kLevelMinVoxels (first order: (level - w) /
-          // |grad w|, central differences over a voxel), the node is outside: the estimate
-          // carried patches and balls on past their last samples (between a sparse tube's
-          // strands, a part's end).
+          // w unclear and against the estimate, on a closed set (kClosedFlux, kClosedRims) away
+          // from its rim samples (beside its few rims, a part's unsampled end, the rims' balls
+          // close as on an open side). The estimate inside and w below the surface's own level
+          // here (LocalLevel), or the estimate outside and w above 1/2 (the level is no higher):
+          // where w's surface at that level is farther from the node than the estimate's own and
+          // than kLevelMinVoxels (first order: |level - w| / |grad w|, central differences over a
+          // voxel), w's side stands. The estimate had carried patches and balls on past their
+          // last samples (between a sparse tube's strands, over an unsampled face), or cut short
+          // a part whose samples it did not join. Not w >= level outside: outside a thin part w
+          // reaches a low level (the bull, camel and elephant with 500 samples grew phantoms).
+          const bool cut = x <= 0.0f;  // w < 1/2 here
           std::array<std::size_t, kLevelNeighbours> near_idx{};
           std::array<double, kLevelNeighbours> near_d2{};
           const std::size_t got =
-              closed_set && x <= 0.0f ? wide.knnSearch(p.data(), kLevelNeighbours, near_idx.data(), near_d2.data()) : 0;
-          const double level = LocalLevel(levels, std::span(near_idx.data(), got));
+              closed_set ? wide.knnSearch(p.data(), kLevelNeighbours, near_idx.data(), near_d2.data()) : 0;
+          const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
           bool near_rim = false;
           for (std::size_t k = 0; k < got; ++k) near_rim = near_rim || rim[near_idx[k]] != 0;
-          if (got > 0 && w < level && !near_rim) {
+          if (got > 0 && (w < level) == cut && !near_rim) {
             V3 grad;
             for (Eigen::Index axis = 0; axis < 3; ++axis) {
               const V3 step = h * V3::Unit(axis);
               grad[axis] = 0.5 * (winding(V3(p + step)) - winding(V3(p - step)));
             }
             const double nearest = std::sqrt(near_d2[0]) / h;
-            const double to_level = grad.norm() > 1e-12 ? (level - w) / grad.norm() : nearest;
-            if (to_level > std::max(-static_cast<double>(x), kLevelMinVoxels)) {
-              x = std::max(1e-6f, std::min(band, static_cast<float>(std::min(to_level, nearest))));
+            const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
+            if (to_level > std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels)) {
+              const float mag = std::min(band, static_cast<float>(std::min(to_level, nearest)));
+              x = cut ? std::max(1e-6f, mag) : -mag;
               ++local;
               continue;
             }

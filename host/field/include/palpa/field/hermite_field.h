@@ -32,14 +32,14 @@
 // (or, w unclear, a dropped sample's: HermiteOptions::guard_positions; or, w unclear on a closed
 // set (normals' flux under 0.1 of the area, rim samples fewer than 0.4 sqrt(n)) away from its rim
 // samples, outside where w is below the level it takes at the 8 nearest samples,
-// SampleProbes::Levels, and w's surface at that level lies farther than the estimate's own and
-// than a voxel: sparse sets' phantoms, docs/field-methods.md § Sparse closed sets), and no node on
-// a grid face stays inside. Where w is unclear (0.3 <= w < 1/2,
-// or down to 0.1 behind a rim sample: an open scan's missing side) the inner balls of the nearest
-// samples decide, so the closure continues the scanned curvature (closure_beyond_grid). Last
-// SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the proxy's
-// sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
-// patches meet or the bracket clamps.
+// SampleProbes::Levels, and inside where w is above 1/2, when w's surface at that level lies
+// farther than the estimate's own and than a voxel: sparse sets' phantoms and holes,
+// docs/field-methods.md § Sparse closed sets), and no node on a grid face stays inside. Where
+// w is unclear (0.3 <= w < 1/2, or down to 0.1 behind a rim sample: an open scan's missing side)
+// the inner balls of the nearest samples decide, so the closure continues the scanned curvature
+// (closure_beyond_grid). Last SparseField::ProjectLipschitz makes every axis neighbour difference
+// <= 1 voxel, as the proxy's sphere tracing needs: the per-node formula alone breaks that by up
+// to ~2.5 voxels where patches meet or the bracket clamps.
 // Deterministic for any thread count (every node is computed independently, ties broken by
 // sample index; the projection's result does not depend on its order).
 #pragma once
