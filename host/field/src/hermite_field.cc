@@ -747,6 +747,19 @@ double LocalLevel(const std::vector<double>& levels, std::span<const std::size_t
   return std::clamp(sum / static_cast<double>(nearest.size()), kBallClosingWinding, 0.5);
 }
 
+// Whether the samples make a closed set (kClosedFlux, kClosedRims): their normals' flux and their
+// rim samples (RimSamples) are few. `areas` as the winding number's, `rim` 0 or 1; same sizes.
+bool ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas, const std::vector<std::uint8_t>& rim) {
+  V3 flux = V3::Zero();
+  double area = 0.0;
+  for (std::size_t i = 0; i < normals.size(); ++i) {
+    flux += areas[i] * normals[i];
+    area += areas[i];
+  }
+  const auto rims = static_cast<double>(std::count(rim.begin(), rim.end(), std::uint8_t{1}));
+  return flux.norm() < kClosedFlux * area && rims < kClosedRims * std::sqrt(static_cast<double>(normals.size()));
+}
+
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
 // or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
 // samples nearest it. Unclear is w >= kBallClosingWinding, or w >= kRimClosingWinding where the
@@ -1031,15 +1044,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The surface's own w level at each sample (1/2 on a densely sampled closed surface, lower on a
   // sparse or thin part), for the unclear nodes below; on closed sets only (an open side's
   // closure has w below the sampled surface's level all over).
-  V3 flux = V3::Zero();
-  double area = 0.0;
-  for (std::size_t i = 0; i < positions.size(); ++i) {
-    flux += areas[i] * normals[i];
-    area += areas[i];
-  }
-  const auto rims = static_cast<double>(std::count(rim.begin(), rim.end(), std::uint8_t{1}));
-  const bool closed_set =
-      flux.norm() < kClosedFlux * area && rims < kClosedRims * std::sqrt(static_cast<double>(positions.size()));
+  const bool closed_set = ClosedSet(normals, areas, rim);
   const std::vector<double> levels =
       closed_set ? SampleProbes(positions, normals).Levels(normals) : std::vector<double>{};
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
