@@ -1110,10 +1110,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
-          // w unclear and against the estimate, on a closed set (kClosedFlux, kClosedRims) away
-          // from its rim samples (beside its few rims, a part's unsampled end, the rims' balls
-          // close as on an open side). The estimate inside and w below the surface's own level
-          // here (LocalLevel), or the estimate outside and w above 1/2 (the level is no higher):
+          // w unclear and against the estimate, on a closed set (kClosedFlux, kClosedRims). The
+          // estimate inside and w below the surface's own level here (LocalLevel), away from
+          // rim samples (beside its few rims, a part's unsampled end, the rims' balls close as on
+          // an open side: w low is no evidence), or the estimate outside and w above 1/2 (the
+          // level is no higher; w above 1/2 is inside beside a rim too):
           // where w's surface at that level is farther from the node than the estimate's own and
           // than kLevelMinVoxels (first order: |level - w| / |grad w|, central differences over a
           // voxel), w's side stands. The estimate had carried patches and balls on past their
@@ -1128,7 +1129,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
           bool near_rim = false;
           for (std::size_t k = 0; k < got; ++k) near_rim = near_rim || rim[near_idx[k]] != 0;
-          if (got > 0 && (w < level) == cut && !near_rim) {
+          if (got > 0 && (w < level) == cut && !(cut && near_rim)) {
             V3 grad;
             for (Eigen::Index axis = 0; axis < 3; ++axis) {
               const V3 step = h * V3::Unit(axis);
