@@ -1127,9 +1127,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           const std::size_t got =
               closed_set ? wide.knnSearch(p.data(), kLevelNeighbours, near_idx.data(), near_d2.data()) : 0;
           const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
-          bool near_rim = false;
-          for (std::size_t k = 0; k < got; ++k) near_rim = near_rim || rim[near_idx[k]] != 0;
-          if (got > 0 && (w < level) == cut && !(cut && near_rim)) {
+          const bool cut_beside_rim =
+              cut && std::any_of(near_idx.begin(), near_idx.begin() + static_cast<std::ptrdiff_t>(got),
+                                 [&](std::size_t k) { return rim[k] != 0; });
+          if (got > 0 && (w < level) == cut && !cut_beside_rim) {
             V3 grad;
             for (Eigen::Index axis = 0; axis < 3; ++axis) {
               const V3 step = h * V3::Unit(axis);

@@ -30,9 +30,9 @@
 // evaluated nodes clamped to the band edge take w's side where all 8 corners are sure of it
 // (< 0.3 or > 0.7), nodes farther than a trust distance from every sample take a clear w's side
 // (or, w unclear, a dropped sample's: HermiteOptions::guard_positions; or, w unclear on a closed
-// set (normals' flux under 0.1 of the area, rim samples fewer than 0.4 sqrt(n)) away from its rim
-// samples, outside where w is below the level it takes at the 8 nearest samples,
-// SampleProbes::Levels, and inside where w is above 1/2, when w's surface at that level lies
+// set (normals' flux under 0.1 of the area, rim samples fewer than 0.4 sqrt(n)), outside where
+// w is below the level it takes at the 8 nearest samples (SampleProbes::Levels) and none of them
+// is a rim sample, and inside where w is above 1/2, when w's surface at that level lies
 // farther than the estimate's own and than a voxel: sparse sets' phantoms and holes,
 // docs/field-methods.md § Sparse closed sets), and no node on a grid face stays inside. Where
 // w is unclear (0.3 <= w < 1/2, or down to 0.1 behind a rim sample: an open scan's missing side)
