@@ -77,8 +77,10 @@ struct HermiteOptions {
   // Samples dropped as outliers (palpa build: FindWindingOutliers), metres, with their outward
   // normals (any length > 0): no patch, no balls, no share of the winding number, but each one's
   // tangent disc still bounds the packed balls as a sample's does (step 3), and where the winding
-  // number is unclear a guard nearer than every sample that a node lies in front of (beyond the
-  // trust distance) puts it outside, against the estimate. A sparse set's true samples are
+  // number is unclear a guard that a node lies in front of (beyond the trust distance) puts it
+  // outside, against the estimate, when the guard is nearer than the node's 8th nearest sample
+  // and none of those 8 faces the guard with the node behind it (a surface between them: the
+  // node is in the part across a gap). A sparse set's true samples are
   // dropped too (the unseen bull with 500 samples: 1-2 %, such as the lone sample on a hoof's
   // sole), and their neighbours' balls and patches then carried the part on past where they
   // stood, making phantom solid 3-9 voxels deep; an outlier's disc can only shrink balls. The
