@@ -74,6 +74,8 @@ constexpr std::size_t kClosingBalls = 16;
 // samples (GuardEndsPart). The nearest alone left the bull's 49 far-wrong nodes (1,000 samples,
 // seed 1; 27 under its hooves); 8 leaves 25.
 constexpr std::size_t kGuardNeighbours = 8;
+// The far pass finds this many nearest samples once per unclear node for both.
+constexpr std::size_t kNearNeighbours = std::max(kLevelNeighbours, kGuardNeighbours);
 // Beside a rim (RimSamples) the inner balls close down to this w.
 constexpr double kRimClosingWinding = 0.1;
 constexpr std::size_t kRimNeighbours = 16;
@@ -758,16 +760,15 @@ double LocalLevel(const std::vector<double>& levels, std::span<const std::size_t
 // camel's legs with 500 samples, seed 3: 16 -> 32 far-wrong nodes without this test). Not only
 // the nearest: beneath a hoof whose sole had one sample, the walls' samples are nearer than the
 // sole's to most nodes, but their planes pass by (the bull with 1,000 samples, seed 1: 49 -> 25
-// far-wrong nodes). Units: metres, as `p`; `tree` indexes `positions`.
+// far-wrong nodes). Units: metres, as `p`; `nearest` and `nearest_d2` (squared) are `p`'s
+// kGuardNeighbours nearest samples (fewer in a smaller set), nearest first.
 bool GuardEndsPart(const V3& p, const V3& guard, double guard_d2, const std::vector<V3>& positions,
-                   const std::vector<V3>& normals, const KdTree& tree) {
-  std::array<std::size_t, kGuardNeighbours> idx{};
-  std::array<double, kGuardNeighbours> d2{};
-  const std::size_t got = tree.knnSearch(p.data(), kGuardNeighbours, idx.data(), d2.data());
-  if (got == 0 || !(guard_d2 < d2[got - 1])) return false;
-  for (std::size_t m = 0; m < got; ++m) {
-    const V3& s = positions[idx[m]];
-    const V3& n = normals[idx[m]];
+                   const std::vector<V3>& normals, std::span<const std::size_t> nearest,
+                   std::span<const double> nearest_d2) {
+  if (nearest.empty() || !(guard_d2 < nearest_d2.back())) return false;
+  for (const std::size_t i : nearest) {
+    const V3& s = positions[i];
+    const V3& n = normals[i];
     if ((p - s).dot(n) < 0.0 && (guard - s).dot(n) > 0.0) return false;
   }
   return true;
@@ -1148,10 +1149,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           // a part whose samples it did not join. Not w >= level outside: outside a thin part w
           // reaches a low level (the bull, camel and elephant with 500 samples grew phantoms).
           const bool cut = x <= 0.0f;  // w < 1/2 here
-          std::array<std::size_t, kLevelNeighbours> near_idx{};
-          std::array<double, kLevelNeighbours> near_d2{};
-          const std::size_t got =
-              closed_set ? wide.knnSearch(p.data(), kLevelNeighbours, near_idx.data(), near_d2.data()) : 0;
+          // The node's nearest samples, once for the level rule and the guards below.
+          std::array<std::size_t, kNearNeighbours> near_idx{};
+          std::array<double, kNearNeighbours> near_d2{};
+          const std::size_t near = closed_set || !guard_positions.empty()
+                                       ? wide.knnSearch(p.data(), kNearNeighbours, near_idx.data(), near_d2.data())
+                                       : 0;
+          const std::size_t got = closed_set ? std::min(near, kLevelNeighbours) : 0;
           const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
           const bool cut_beside_rim =
               cut && std::any_of(near_idx.begin(), near_idx.begin() + static_cast<std::ptrdiff_t>(got),
@@ -1180,7 +1184,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           double g2 = 0.0;
           guards.knnSearch(p.data(), 1, &g, &g2);
           const double front = (p - guard_positions[g]).dot(guard_normals[g]);
-          if (front <= trust || !GuardEndsPart(p, guard_positions[g], g2, positions, normals, wide)) continue;
+          const std::size_t guard_near = std::min(near, kGuardNeighbours);
+          if (front <= trust ||
+              !GuardEndsPart(p, guard_positions[g], g2, positions, normals, std::span(near_idx.data(), guard_near),
+                             std::span(near_d2.data(), guard_near)))
+            continue;
           x = std::min(band, static_cast<float>(front / h));
           ++local;
           continue;
