@@ -278,6 +278,32 @@ TEST(SmoothBand, KeepsALinearFieldAndAveragesNodeNoise) {
   EXPECT_LT(ratio, 0.28);
 }
 
+// The grid's face nodes keep their values (HermiteField leaves them at least half a voxel
+// outside; averaged with inside neighbours they would fall): a face node at +0.5 beside nodes at
+// -0.45 stays +0.5, while an interior node of the same field moves.
+TEST(SmoothBand, KeepsTheGridFaceNodes) {
+  const GridSpec g = Grid(16, 16, 16, 6);
+  const auto value = [](int i, int j, int k) {
+    return (i == 0 ? 0.5f : -0.45f) + 0.05f * static_cast<float>((j + 2 * k) % 3);
+  };
+  SparseField f = AllAllocated(g, value);
+  f.SmoothBand();
+  std::size_t faces = 0, moved = 0;
+  for (int i = 0; i < 16; ++i)
+    for (int j = 0; j < 16; ++j)
+      for (int k = 0; k < 16; ++k) {
+        const bool face = i == 0 || j == 0 || k == 0 || i == 15 || j == 15 || k == 15;
+        if (face) {
+          ++faces;
+          EXPECT_EQ(f.Value(i, j, k), value(i, j, k)) << i << " " << j << " " << k;
+        } else {
+          moved += f.Value(i, j, k) != value(i, j, k) ? 1u : 0u;
+        }
+      }
+  EXPECT_EQ(faces, 16u * 16u * 16u - 14u * 14u * 14u);
+  EXPECT_GT(moved, 1000u);
+}
+
 // The heat equation for t = 1/4 voxel^2: a sphere's signed distance r - R rises by
 // t * laplacian = (1/4)(2/r) = 0.5/r voxels, so its surface moves inward by 0.05 voxel at R = 10.
 // Bricks away from the surface stay uniform; values stay within the band and Lipschitz.

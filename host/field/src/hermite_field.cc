@@ -86,6 +86,8 @@ constexpr std::size_t kRimNeighbours = 16;
 constexpr double kRimProbeSpacings = 2.0;
 constexpr double kRimProbeWinding = 0.1;
 constexpr double kOpenFaceWinding = 0.1;
+// A grid face node is set outside (at the band) below this value (voxels), not only at or below 0.
+constexpr float kFaceMinOutsideVoxels = 0.5f;
 // A face node is capped (closed behind) when one of its kCapNeighbours nearest samples' normals
 // lies within acos(kCapCos) = 60 degrees of the face's outward normal.
 constexpr std::size_t kCapNeighbours = 8;
@@ -1178,7 +1180,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           // w unclear, the estimate inside: a guard (a dropped sample) that the node lies in
           // front of, beyond trust, decides outside when it is among the node's neighbours
           // (GuardEndsPart). Such a guard is, on a sparse set, the only sample of a part's end (a
-          // hoof's sole), whose neighbours' patches carry the part on past it.
+          // hoof's sole), whose neighbours' patches carry the part on past it. With the estimate
+          // outside the side stands and the guard's plane gives the distance (the bull with 500
+          // samples, seed 4: band mean 0.6326 voxel with the estimate's, 0.6322 with the guard's).
           if (guard_positions.empty()) continue;
           std::size_t g = 0;
           double g2 = 0.0;
@@ -1213,7 +1217,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   st.winding_far_nodes = far_flipped.load();
   // No inside node on a grid face: the object must be closed inside the grid (an open scan's
   // side, a stray sample near the edge). A face node at or below 0 is set outside; the Lipschitz
-  // projection then puts the surface within a voxel of the face.
+  // projection then puts the surface within a voxel of the face. So is one outside by less than
+  // kFaceMinOutsideVoxels, uncounted: next to an inside node the projection scales it down
+  // (a / (a + b) of its value), and a few thousandths of a voxel round to 0, inside, in the blob
+  // (v2 keeps 1/256 voxel): CGAL's bear_bis scanned from 6 views had a face node at 6e-6 voxel.
+  // At the band, every face node ends at least half a voxel outside.
   std::size_t closed = 0;
   std::vector<std::array<int, 3>> cut;  // the face nodes set outside
   const std::array<int, 3> dims = grid.dims;
@@ -1232,7 +1240,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
               if (i >= dims[0] || j >= dims[1] || k >= dims[2]) continue;
               if (!on_grid_face(i, j, k)) continue;
               float& x = values[(a * kB + c) * kB + e];
-              if (x > 0.0f) continue;
+              if (x > 0.0f) {
+                if (x < kFaceMinOutsideVoxels) x = band;
+                continue;
+              }
               x = band;
               ++closed;
               cut.push_back({i, j, k});

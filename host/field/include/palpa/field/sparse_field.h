@@ -102,7 +102,9 @@ class SparseField {
   // voxels for principal curvatures k1, k2 in 1/voxel (the heat equation for t = 1/4: 0.05 voxel
   // on a sphere of radius 10). A convex combination of translates, it keeps every axis-neighbour
   // difference within kLipschitzStep (up to rounding; ProjectLipschitz then makes it exact). Uniform
-  // bricks stay uniform. O(allocated bricks); parallel, deterministic.
+  // bricks stay uniform, and the grid's face nodes keep their values (HermiteField leaves each at
+  // least half a voxel outside; an average with inside neighbours could put one inside).
+  // O(allocated bricks); parallel, deterministic.
   void SmoothBand();
   LipschitzStats ProjectLipschitz();
   // Writes phi as Q16.16 voxels (round to nearest) for every node into `dense` (NodeCount()
