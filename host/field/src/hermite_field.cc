@@ -1221,7 +1221,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // kFaceMinOutsideVoxels, uncounted: next to an inside node the projection scales it down
   // (a / (a + b) of its value), and a few thousandths of a voxel round to 0, inside, in the blob
   // (v2 keeps 1/256 voxel): CGAL's bear_bis scanned from 6 views had a face node at 6e-6 voxel.
-  // At the band, every face node ends at least half a voxel outside.
+  // Set to the band, a face node ends at least half a voxel outside after the projection
+  // (band / (band + b) next to an inside node at -b, b <= band).
   std::size_t closed = 0;
   std::vector<std::array<int, 3>> cut;  // the face nodes set outside
   const std::array<int, 3> dims = grid.dims;

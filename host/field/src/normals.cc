@@ -35,9 +35,10 @@ constexpr double kSelectNoise = 2.0;
 // low-polygon one), a sample is refined only when the best plane holds this share of its
 // neighbourhood within the selection width itself (not widened by the noise): a facet, which its
 // jet fit bends towards the next one, not a curve or a noisy patch. Estimated normals, wrong sign
-// in the band against exact normals, two draws (issue 20): CGAL's pinion 2.25x / 2.04x -> 1.94x /
-// 1.71x, the elk 1.77x / 1.80x -> 1.49x / 1.53x, the double torus (466 faces) 1.97x / 1.82x ->
-// 1.64x / 1.58x; 0.3 took knot1 (a tube of facets) 0.95x -> 1.10x, 0.5-0.6 gained half as much.
+// in the band against exact normals, two draws (issue 20, bench/field/robustness.py): CGAL's pinion
+// 2.29x / 2.05x -> 1.98x / 1.71x, the elk 1.78x / 1.81x -> 1.50x / 1.55x, the double torus (466
+// faces) 2.00x / 1.84x -> 1.66x / 1.59x; 0.3 took knot1 (a tube of facets) 0.96x -> 1.10x, 0.5-0.6
+// gained half as much.
 constexpr double kFacetShare = 0.4;
 // Triples of P_i and two of its kTripleNeighbours nearest: a face met by only a thin row of
 // samples near P_i still has a non-collinear pair among them (9 -> 13: fandisk 0.52 -> 0.49 %).

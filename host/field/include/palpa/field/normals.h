@@ -108,8 +108,8 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// (one figure for the set: the median offset of neighbours from the smooth planes / 0.674) is
 /// over w/2, the sample keeps its jet normal, the better average there, unless that plane holds
 /// 40 % of its neighbourhood within the narrow width itself: a facet of a low-polygon mesh, whose
-/// creases the noise figure counts (CGAL's pinion and elk, wrong sign in the band 2.25x / 1.77x
-/// that with exact normals -> 1.94x / 1.49x); so does a sample on a rim
+/// creases the noise figure counts (CGAL's pinion and elk, wrong sign in the band 2.29x / 1.78x
+/// that with exact normals -> 1.98x / 1.50x); so does a sample on a rim
 /// (its neighbours leave an angular gap over 150 degrees in its tangent plane: every plane through
 /// it extrapolates from one side and tilts, and an open side's closure magnifies the tilt; range
 /// scans without normals: far-wrong nodes 3,248 -> 0 on the sphere). Run after OrientNormals:
