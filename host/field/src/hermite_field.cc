@@ -1042,9 +1042,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // values well inside the band, which the clamped test above never sees. There, a clear w
   // (|w - 1/2| > kWindingClear at the node itself) decides the side, and the distance to the
   // nearest sample bounds the magnitude (the surface passes through the samples).
-  const auto on_grid_face = [&](int i, int j, int k) {
-    return i == 0 || j == 0 || k == 0 || i == grid.dims[0] - 1 || j == grid.dims[1] - 1 || k == grid.dims[2] - 1;
-  };
   // A face node the inside reached is an open side's evidence only where no sample near it faces
   // that grid face: a closed part's end (a sparse leg's hoof) has samples whose normals point at
   // the face; an open side (a plate's cut edge, a scan's missing bottom) has none. CGAL's bull with
@@ -1208,7 +1205,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
         // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
         const int i = bi * kB + a, j = bj * kB + c, k = bk * kB + e;
-        if (w >= kOpenFaceWinding && on_grid_face(i, j, k) && !capped(i, j, k, p)) ++face_local;
+        if (w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p)) ++face_local;
       }
     }
     far_flipped += local;
@@ -1239,7 +1236,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             for (int e = 0; e < kB; ++e) {
               const int i = bi * kB + a, j = bj * kB + c, k = bk * kB + e;
               if (i >= dims[0] || j >= dims[1] || k >= dims[2]) continue;
-              if (!on_grid_face(i, j, k)) continue;
+              if (!grid.OnFace(i, j, k)) continue;
               float& x = values[(a * kB + c) * kB + e];
               if (x > 0.0f) {
                 if (x < kFaceMinOutsideVoxels) x = band;

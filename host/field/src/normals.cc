@@ -263,13 +263,18 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       const double select = std::max(kSelectWidth * width, kSelectNoise * fit_noise);
       V3 normal = start[i];
       double best = -1;
+      // The neighbours on the plane through P_i with this normal, within width s (soft count).
+      const auto on_plane = [&](const V3& plane, double s) {
+        double count = 0;
+        for (std::size_t m = 0; m < got; ++m) {
+          const double t = plane.dot(positions[idx[m]] - positions[i]) / s;
+          count += std::exp(-t * t);
+        }
+        return count;
+      };
       const auto consider = [&](V3 candidate) {
         if (candidate.dot(start[i]) < 0) candidate = -candidate;
-        double score = 0;
-        for (std::size_t m = 0; m < got; ++m) {
-          const double t = candidate.dot(positions[idx[m]] - positions[i]) / select;
-          score += std::exp(-t * t);
-        }
+        const double score = on_plane(candidate, select);
         if (score > best) {  // ties: the first candidate
           best = score;
           normal = candidate;
@@ -286,15 +291,9 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
           if (area > 0.3 * u.norm() * v.norm()) consider(cross / area);
         }
       }
-      if (rough) {
-        // Counted at the narrow width itself, not widened by the noise: a noisy patch is no facet.
-        double flat = 0;
-        for (std::size_t m = 0; m < got; ++m) {
-          const double t = normal.dot(positions[idx[m]] - positions[i]) / (kSelectWidth * width);
-          flat += std::exp(-t * t);
-        }
-        if (flat < kFacetShare * static_cast<double>(got)) continue;
-      }
+      // A facet is counted at the narrow width itself, not widened by the noise: a noisy patch is
+      // no facet.
+      if (rough && on_plane(normal, kSelectWidth * width) < kFacetShare * static_cast<double>(got)) continue;
       // Then a weighted PCA plane of its supporters, twice (iteratively reweighted least squares).
       for (int iteration = 0; iteration < 2; ++iteration) {
         V3 centre = V3::Zero();

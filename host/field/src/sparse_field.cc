@@ -469,8 +469,7 @@ void SparseField::SmoothBand() {
             // the grid's face nodes: the build leaves each at least half a voxel outside (an open
             // scan's closure cut by a face), which an inside neighbour's average would undo.
             const int i = bc[0] * kBrick + a, j = bc[1] * kBrick + b, k = bc[2] * kBrick + c;
-            if (a >= box.n[0] || b >= box.n[1] || c >= box.n[2] || i == 0 || j == 0 || k == 0 ||
-                i == grid_.dims[0] - 1 || j == grid_.dims[1] - 1 || k == grid_.dims[2] - 1) {
+            if (a >= box.n[0] || b >= box.n[1] || c >= box.n[2] || grid_.OnFace(i, j, k)) {
               dst[local] = src[local];
               continue;
             }

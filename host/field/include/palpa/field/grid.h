@@ -29,6 +29,10 @@ struct GridSpec {
                static_cast<std::size_t>(dims[2]) +
            static_cast<std::size_t>(k);
   }
+  // Whether node (i, j, k) lies on one of the grid's six faces.
+  bool OnFace(int i, int j, int k) const {
+    return i == 0 || j == 0 || k == 0 || i == dims[0] - 1 || j == dims[1] - 1 || k == dims[2] - 1;
+  }
   // Position of node (i, j, k) in metres.
   Eigen::Vector3d Node(int i, int j, int k) const {
     return {origin_m.x() + i * voxel_m, origin_m.y() + j * voxel_m, origin_m.z() + k * voxel_m};
