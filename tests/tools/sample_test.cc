@@ -55,7 +55,17 @@ TEST_F(OffErrors, NameTheFileAndLine) {
       {"OFF\n4 4 0\n0 0 0\n1 0 zero\n", "bad.off:4: 'zero' is not a number"},
       {"OFF\n4 4 0\n0 0 0\n1 0\n", "bad.off:4: vertex 1 needs 3 coordinates"},
       {"OFF\n4 4 0\n0 0 0\n1 0 inf\n", "bad.off:4: vertex 1 has a non-finite coordinate"},
-      {"OFF\n4 4 0\n" + tet_v + "4 0 1 2 3\n", "bad.off:7: face 0 has 4 vertices; palpa reads triangle meshes only"},
+      {"OFF\n4 4 0\n" + tet_v + "2 0 1\n", "bad.off:7: face 0 has 2 vertices; a face needs at least 3"},
+      {"OFF\n4 4 0\n" + tet_v + "4 0 1 2\n", "bad.off:7: face 0 lists 3 of 4 vertex indices"},
+      {"OFF\n4 4 0\n" + tet_v + "4 0 1 2 1\n", "bad.off:7: face 0 repeats a vertex"},
+      {"4OFF\n", "bad.off:1: '4OFF' (homogeneous or n-dimensional OFF) is not read"},
+      {"nOFF\n", "bad.off:1: 'nOFF' (homogeneous or n-dimensional OFF) is not read"},
+      {"XOFF\n", "bad.off:1: expected the 'OFF' header, found 'XOFF'"},
+      {"OFF BINARY\n", "bad.off:1: binary OFF is not read; write it as ASCII OFF"},
+      {"OFF\n4 4 0\n" + tet_v + "300 0 1 2\n", "bad.off:7: face 0 has 300 vertices; palpa reads polygons of up to 256"},
+      // A pentagram crosses itself: no triangulation keeps its sides.
+      {"OFF\n5 4 0\n1 0 0\n0.309 0.951 0\n-0.809 0.588 0\n-0.809 -0.588 0\n0.309 -0.951 0\n5 0 2 4 1 3\n",
+       "bad.off:8: face 0 is a polygon of 5 vertices that has no triangulation"},
       {"OFF\n4 4 0\n" + tet_v + "3 0 1 4\n", "bad.off:7: vertex index 4 is out of range [0, 4)"},
       {"OFF\n4 4 0\n" + tet_v + "3 0 1 1\n", "bad.off:7: face 0 repeats a vertex"},
       {"OFF\n4 4 0\n" + tet_v + "3 0 2 1\n", "bad.off:7: file ends after 1 of 4 faces"},
@@ -75,6 +85,67 @@ TEST_F(OffErrors, NameTheFileAndLine) {
   auto missing = mesh::ReadOff(Path("missing.off"));
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.error().message.find("missing.off"), std::string::npos);
+}
+
+// Geomview's OFF variants (COFF, NOFF, STCNOFF) as CGAL's data ships them (cactus.off is COFF),
+// and polygon faces: a unit cube of quads, two of them pentagons through a vertex on their shared
+// side, reads as 3 + 2 + 3 + 3 × 2 = 14 triangles, none of zero area, that close the cube (volume
+// 1, area 6), each triangle with its face's source line.
+TEST_F(OffErrors, VariantsAndPolygonsRead) {
+  const std::string cube_v = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n0.5 0 0\n";
+  const std::string cube_f = "5 0 3 2 1 8\n4 4 5 6 7\n5 0 8 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n";
+  for (const std::string header : {"OFF", "COFF", "NOFF", "STCNOFF", "OFF 9 6 0"}) {
+    std::string text = header + "\n";
+    if (header.size() <= 7) text += "9 6 0\n";
+    // Extra numbers after x y z (a colour, a normal, texture coordinates) are ignored.
+    for (std::size_t start = 0; start < cube_v.size();) {
+      const std::size_t end = cube_v.find('\n', start);
+      text += cube_v.substr(start, end - start) + (header == "OFF" ? "" : " 0.25 0.5 0.75 1 0 0") + "\n";
+      start = end + 1;
+    }
+    text += cube_f;
+    auto m = mesh::ReadClosedMesh(Write("cube.off", text));
+    ASSERT_TRUE(m) << header << ": " << m.error().message;
+    EXPECT_EQ(m->faces.size(), 14u) << header;
+    EXPECT_EQ(m->vertices.size(), 9u) << header;
+    EXPECT_NEAR(mesh::SignedVolume(*m), 1.0, 1e-12) << header;
+    EXPECT_NEAR(mesh::SurfaceArea(*m), 6.0, 1e-12) << header;
+    for (std::size_t f = 0; f < m->faces.size(); ++f) EXPECT_GT(mesh::FaceNormal(*m, f).norm(), 0.5) << f;
+    const int first_face_line = header.size() <= 7 ? 12 : 11;
+    ASSERT_EQ(m->face_lines.size(), m->faces.size());
+    EXPECT_EQ(m->face_lines[0], first_face_line) << header;
+    EXPECT_EQ(m->face_lines[2], first_face_line) << header;      // the pentagon's last triangle
+    EXPECT_EQ(m->face_lines[3], first_face_line + 1) << header;  // the top quad
+  }
+}
+
+// CGAL's double-torus-example.off has concave quads. An L-shaped prism (hexagons for the ends,
+// concave at (1, 1)) reads with its exact volume 3 and area 2 × 3 + 8 × 1; a fan from a corner
+// would have covered the missing square twice over or not at all.
+TEST_F(OffErrors, ConcavePolygonsKeepTheirShape) {
+  std::string text = "OFF\n12 8 0\n";
+  const double xy[6][2] = {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};
+  for (const double z : {0.0, 1.0})
+    for (const auto& p : xy) text += std::to_string(p[0]) + " " + std::to_string(p[1]) + " " + std::to_string(z) + "\n";
+  text += "6 5 4 3 2 1 0\n6 6 7 8 9 10 11\n";  // bottom (clockwise from above: outward −z), top
+  for (int i = 0; i < 6; ++i) {                // sides, outward
+    const int j = (i + 1) % 6;
+    text += "4 " + std::to_string(i) + " " + std::to_string(j) + " " + std::to_string(j + 6) + " " +
+            std::to_string(i + 6) + "\n";
+  }
+  // Start each end at the concave corner too: a fan from there would be right by luck.
+  for (const bool rotated : {false, true}) {
+    std::string file = text;
+    if (rotated) {
+      file.replace(file.find("6 5 4 3 2 1 0"), 13, "6 3 2 1 0 5 4");
+      file.replace(file.find("6 6 7 8 9 10 11"), 15, "6 8 9 10 11 6 7");
+    }
+    auto m = mesh::ReadClosedMesh(Write("ell.off", file));
+    ASSERT_TRUE(m) << m.error().message;
+    EXPECT_EQ(m->faces.size(), 2u * 4 + 6 * 2);
+    EXPECT_NEAR(mesh::SignedVolume(*m), 3.0, 1e-9);
+    EXPECT_NEAR(mesh::SurfaceArea(*m), 14.0, 1e-9);
+  }
 }
 
 TEST_F(OffErrors, OpenOrInconsistentMeshesAreRefusedWithTheFaceLine) {

@@ -13,6 +13,7 @@
 
 #include "palpa/io/escape.h"
 #include "palpa/io/file_safety.h"
+#include "triangle_mesh_internal.h"
 
 namespace palpa::mesh {
 namespace {
@@ -68,6 +69,31 @@ class LineReader {
   int line_ = 0;
 };
 
+struct OffHeader {
+  std::string error;  // empty when the keyword is read
+};
+
+// Geomview's OFF(5) keyword: `[ST][C][N][4][n]OFF`. ST, C and N add texture coordinates, a colour
+// and a normal after each vertex's x y z; 4 (homogeneous) and n (any dimension) change the
+// coordinates themselves and are refused.
+OffHeader ParseOffHeader(std::string_view keyword) {
+  OffHeader header;
+  std::string_view k = keyword;
+  if (k.size() < 3 || k.substr(k.size() - 3) != "OFF") {
+    header.error = fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
+    return header;
+  }
+  k.remove_suffix(3);
+  for (std::string_view prefix : {"ST", "C", "N"})
+    if (k.starts_with(prefix)) k.remove_prefix(prefix.size());
+  if (k == "4" || k == "n" || k == "4n")
+    header.error =
+        fmt::format("'{}' (homogeneous or n-dimensional OFF) is not read; palpa reads 3-D OFF", io::Escape(keyword));
+  else if (!k.empty())
+    header.error = fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
+  return header;
+}
+
 std::uint64_t EdgeKey(int a, int b) {
   return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) | static_cast<std::uint32_t>(b);
 }
@@ -89,9 +115,12 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
     if (!reader.error().empty()) return fail("");
     return std::unexpected(Error{file + ": empty file, expected an OFF header"});
   }
-  // The header is `OFF`, optionally followed by the counts on the same line.
-  if (t[0] != "OFF") return fail(fmt::format("expected the 'OFF' header, found '{}'", io::Escape(t[0])));
+  // The header is `[ST][C][N]OFF` (Geomview's OFF(5)), optionally followed by the counts on the
+  // same line. The prefixes only add numbers after a vertex's x y z, which are ignored.
+  const OffHeader header = ParseOffHeader(t[0]);
+  if (!header.error.empty()) return fail(header.error);
   t.erase(t.begin());
+  if (!t.empty() && t[0] == "BINARY") return fail("binary OFF is not read; write it as ASCII OFF");
   if (t.empty() && !reader.Next(t)) return fail("expected the counts line 'vertices faces edges'");
   if (t.size() < 2 || t.size() > 3) return fail("expected the counts line 'vertices faces edges'");
   long long nv = 0;
@@ -99,6 +128,7 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
   if (!Parse(t[0], nv) || !Parse(t[1], nf)) return fail("vertex and face counts must be integers");
   if (nv < 4 || nf < 4) return fail(fmt::format("{} vertices and {} faces cannot enclose a volume", nv, nf));
   constexpr long long kMaxCount = 1LL << 28;
+  constexpr int kMaxPolygon = 256;
   if (nv > kMaxCount || nf > kMaxCount) return fail("more than 2^28 vertices or faces");
 
   TriangleMesh mesh;
@@ -120,24 +150,47 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
   const auto faces = static_cast<std::size_t>(std::min<std::uint64_t>(static_cast<std::uint64_t>(nf), size / 8));
   mesh.faces.reserve(faces);
   mesh.face_lines.reserve(faces);
+  std::vector<int> polygon;
+  std::vector<Eigen::Vector3d> corners;
+  std::vector<std::array<int, 3>> triangles;
   for (long long f = 0; f < nf; ++f) {
     if (!reader.Next(t)) return fail(fmt::format("file ends after {} of {} faces", f, nf));
     int n = 0;
     if (!Parse(t[0], n)) return fail(fmt::format("'{}' is not a vertex count", io::Escape(t[0])));
-    if (n != 3) return fail(fmt::format("face {} has {} vertices; palpa reads triangle meshes only", f, n));
-    if (t.size() < 4) return fail(fmt::format("face {} lists {} of 3 vertex indices", f, t.size() - 1));
-    std::array<int, 3> face{};
-    for (int a = 0; a < 3; ++a) {
+    if (n < 3) return fail(fmt::format("face {} has {} vertices; a face needs at least 3", f, n));
+    // The triangulation of a non-planar polygon is cubic in its size.
+    if (n > kMaxPolygon)
+      return fail(fmt::format("face {} has {} vertices; palpa reads polygons of up to {}", f, n, kMaxPolygon));
+    if (t.size() < static_cast<std::size_t>(n) + 1)
+      return fail(fmt::format("face {} lists {} of {} vertex indices", f, t.size() - 1, n));
+    polygon.clear();
+    for (int a = 0; a < n; ++a) {
       const auto token = t[static_cast<std::size_t>(a + 1)];
-      if (!Parse(token, face[static_cast<std::size_t>(a)]))
-        return fail(fmt::format("'{}' is not a vertex index", io::Escape(token)));
-      if (face[static_cast<std::size_t>(a)] < 0 || face[static_cast<std::size_t>(a)] >= nv)
+      int index = 0;
+      if (!Parse(token, index)) return fail(fmt::format("'{}' is not a vertex index", io::Escape(token)));
+      if (index < 0 || index >= nv)
         return fail(fmt::format("vertex index {} is out of range [0, {})", io::Escape(token), nv));
+      if (std::find(polygon.begin(), polygon.end(), index) != polygon.end())
+        return fail(fmt::format("face {} repeats a vertex", f));
+      polygon.push_back(index);
     }
-    if (face[0] == face[1] || face[1] == face[2] || face[0] == face[2])
-      return fail(fmt::format("face {} repeats a vertex", f));
-    mesh.faces.push_back(face);
-    mesh.face_lines.push_back(reader.line());
+    if (n == 3) {
+      mesh.faces.push_back({polygon[0], polygon[1], polygon[2]});
+      mesh.face_lines.push_back(reader.line());
+      continue;
+    }
+    corners.clear();
+    for (const int v : polygon) corners.push_back(mesh.vertices[static_cast<std::size_t>(v)]);
+    if (!internal::TriangulatePolygon(corners, triangles))
+      return fail(
+          fmt::format("face {} is a polygon of {} vertices that has no triangulation (it crosses itself or "
+                      "is degenerate)",
+                      f, n));
+    for (const auto& tri : triangles) {
+      mesh.faces.push_back({polygon[static_cast<std::size_t>(tri[0])], polygon[static_cast<std::size_t>(tri[1])],
+                            polygon[static_cast<std::size_t>(tri[2])]});
+      mesh.face_lines.push_back(reader.line());
+    }
   }
   if (reader.Next(t)) return fail("unexpected data after the last face");
   if (!reader.error().empty()) return fail("");

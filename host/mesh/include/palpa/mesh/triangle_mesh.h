@@ -31,14 +31,19 @@ struct TriangleMesh {
   std::vector<int> face_lines;
 };
 
-/// Reads an ASCII OFF file (Geomview Object File Format): an `OFF` header, a counts line
-/// `nv nf [ne]`, nv vertex lines `x y z` (further numbers, e.g. colours, are ignored), then nf
-/// face lines `3 a b c` (further numbers ignored). `#` starts a comment; blank lines are skipped.
+/// Reads an ASCII OFF file (Geomview Object File Format, OFF(5)): a `[ST][C][N]OFF` header, a
+/// counts line `nv nf [ne]` (or the counts on the header line), nv vertex lines `x y z` (further
+/// numbers, e.g. colours or normals, are ignored), then nf face lines `n i0 … i(n−1)` (further
+/// numbers ignored). A polygon (3 < n ≤ 256) becomes n − 2 triangles wound as it is, by CGAL's
+/// triangulate_hole_polyline (constrained Delaunay in its plane: concave polygons keep their
+/// shape); every triangle keeps its face's line in `face_lines`. `#` starts a comment; blank lines
+/// are skipped.
 ///
 /// Errors (message starts with "FILE:" or "FILE:LINE:"): missing or unreadable file; missing
-/// `OFF` header; bad counts (nv < 4 or nf < 4); a token that is not a number; a non-finite
-/// coordinate; a face that is not a triangle ("palpa reads triangle meshes only"); a vertex index
-/// out of range or repeated within a face; too few lines; data after the last face.
+/// `OFF` header; 4OFF, nOFF or binary OFF; bad counts (nv < 4 or nf < 4); a token that is not a
+/// number; a non-finite coordinate; a face of fewer than 3 or more than 256 vertices; a vertex
+/// index out of range or repeated within a face; a polygon that crosses itself; too few lines;
+/// data after the last face.
 std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path);
 
 /// Checks that the mesh is closed, edge-manifold and consistently oriented: every directed edge
