@@ -43,16 +43,18 @@ enum class NormalsMode {
 };
 
 struct NormalsReport {
-  std::size_t estimated = 0;           ///< normals estimated (estimate, or a file without normals)
-  std::size_t flipped = 0;             ///< orient: normals whose sign was changed from the file's
-  std::size_t components = 0;          ///< connected pieces of the neighbour graph
-  std::size_t open_components = 0;     ///< of which open (sign from the majority or the divergence sum)
-  int neighbours = 0;                  ///< of the jet fit (EstimateNormalLines' result), when estimated
-  std::size_t inverted_parts = 0;      ///< parts of closed pieces turned outward (FlipInvertedParts)
-  std::size_t inverted_samples = 0;    ///< their samples
-  std::size_t open_level_flipped = 0;  ///< estimate: open pieces whose sign the winding level reversed
-  std::size_t sheets = 0;              ///< estimate: sheets turned by the winding energy (FlipSheetsByWinding)
-  std::size_t sheet_samples = 0;       ///< their samples
+  std::size_t estimated = 0;                 ///< normals estimated (estimate, or a file without normals)
+  std::size_t flipped = 0;                   ///< orient: normals whose sign was changed from the file's
+  std::size_t components = 0;                ///< connected pieces of the neighbour graph
+  std::size_t open_components = 0;           ///< of which open (sign from the majority or the divergence sum)
+  int neighbours = 0;                        ///< of the jet fit (EstimateNormalLines' result), when estimated
+  std::size_t inverted_parts = 0;            ///< parts of closed pieces turned outward (FlipInvertedParts)
+  std::size_t inverted_samples = 0;          ///< their samples
+  std::size_t open_level_flipped = 0;        ///< estimate: open pieces whose sign the winding level reversed
+  std::size_t sheets = 0;                    ///< estimate: sheets turned by the winding energy (FlipSheetsByWinding)
+  std::size_t sheet_samples = 0;             ///< their samples
+  std::size_t closed_by_sheets = 0;          ///< estimate: open pieces that turning large sheets closed
+  std::size_t closed_by_sheets_samples = 0;  ///< the normals turned there
   /// "5210 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece
   /// (1 closed, 0 open)", then "; 1 open piece turned outward by the winding number" and "; 1 part
   /// oriented inward as a whole turned outward (109 normals)" and "; 23 sheets turned to agree with
@@ -158,9 +160,12 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// CGAL's bull, 5,000 samples, normals stripped: 136 signs against the exact normals -> 36, wrong
 /// sign in the band 1.84x -> 1.38x the exact normals'; the elk (seed 6) 2.07x -> 1.85x, far-wrong
 /// nodes 211 -> 45 with the smoothed dipoles and the fine pass (docs/field-methods.md § Normals).
+/// `coarse_fraction`: the coarse cut's sheets hold at most n / coarse_fraction samples (8: the body
+/// is no candidate; OrientNormals' retry on pieces open by their flux allows 4).
 /// Returns the samples flipped over both passes; `sheets` the sheets. Unit normals in, same lines out. Deterministic.
 std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
-                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets);
+                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
+                                std::size_t coarse_fraction = 8);
 
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
