@@ -827,22 +827,22 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     // such pieces with sheets of up to a quarter of the samples, and stands only on a piece it
     // closes (flux under kSheetClosedFlux): an open scan's flux is its opening's, which no sign of
     // its sheets removes (b9_training, hippo1, building, half.xyz: unchanged).
-    std::vector<std::uint8_t> open(n, 0);
+    std::vector<std::uint8_t> open_piece(n, 0);
     bool any_open = false;
     for (std::size_t i = 0; i < n; ++i) {
-      open[i] = closed[i] != 0 ? 0 : 1;
-      any_open = any_open || open[i] != 0;
+      open_piece[i] = closed[i] != 0 ? 0 : 1;
+      any_open = any_open || open_piece[i] != 0;
     }
     if (any_open) {
       std::vector<V3> trial = normals;
       std::size_t trial_sheets = 0;
-      if (FlipSheetsByWinding(positions, trial, open, trial_sheets, kOpenSheetFraction) > 0) {
+      if (FlipSheetsByWinding(positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
         std::vector<V3> after(pieces, V3::Zero());
         for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
         std::vector<std::uint8_t> closes(pieces, 0);
         for (std::size_t i = 0; i < n; ++i) {
           const std::uint32_t c = component[i];
-          if (open[i] == 0 || !(after[c].norm() < kSheetClosedFlux * area[c])) continue;
+          if (open_piece[i] == 0 || !(after[c].norm() < kSheetClosedFlux * area[c])) continue;
           if (closes[c] == 0) ++report.closed_by_sheets;
           closes[c] = 1;
           if (trial[i].dot(normals[i]) < 0) ++report.closed_by_sheets_samples;

@@ -69,29 +69,20 @@ class LineReader {
   int line_ = 0;
 };
 
-struct OffHeader {
-  std::string error;  // empty when the keyword is read
-};
-
 // Geomview's OFF(5) keyword: `[ST][C][N][4][n]OFF`. ST, C and N add texture coordinates, a colour
 // and a normal after each vertex's x y z; 4 (homogeneous) and n (any dimension) change the
-// coordinates themselves and are refused.
-OffHeader ParseOffHeader(std::string_view keyword) {
-  OffHeader header;
+// coordinates themselves and are refused. Empty when the keyword is read, else the error.
+std::string OffKeywordError(std::string_view keyword) {
   std::string_view k = keyword;
-  if (k.size() < 3 || k.substr(k.size() - 3) != "OFF") {
-    header.error = fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
-    return header;
-  }
+  if (k.size() < 3 || k.substr(k.size() - 3) != "OFF")
+    return fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
   k.remove_suffix(3);
   for (std::string_view prefix : {"ST", "C", "N"})
     if (k.starts_with(prefix)) k.remove_prefix(prefix.size());
   if (k == "4" || k == "n" || k == "4n")
-    header.error =
-        fmt::format("'{}' (homogeneous or n-dimensional OFF) is not read; palpa reads 3-D OFF", io::Escape(keyword));
-  else if (!k.empty())
-    header.error = fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
-  return header;
+    return fmt::format("'{}' (homogeneous or n-dimensional OFF) is not read; palpa reads 3-D OFF", io::Escape(keyword));
+  if (!k.empty()) return fmt::format("expected the 'OFF' header, found '{}'", io::Escape(keyword));
+  return {};
 }
 
 std::uint64_t EdgeKey(int a, int b) {
@@ -117,8 +108,7 @@ std::expected<TriangleMesh, Error> ReadOff(const std::filesystem::path& path) {
   }
   // The header is `[ST][C][N]OFF` (Geomview's OFF(5)), optionally followed by the counts on the
   // same line. The prefixes only add numbers after a vertex's x y z, which are ignored.
-  const OffHeader header = ParseOffHeader(t[0]);
-  if (!header.error.empty()) return fail(header.error);
+  if (const std::string error = OffKeywordError(t[0]); !error.empty()) return fail(error);
   t.erase(t.begin());
   if (!t.empty() && t[0] == "BINARY") return fail("binary OFF is not read; write it as ASCII OFF");
   if (t.empty() && !reader.Next(t)) return fail("expected the counts line 'vertices faces edges'");
