@@ -85,6 +85,11 @@ constexpr double kSheetClosedFlux = 0.1;
 // The largest sheet, as a fraction 1 / kOpenSheetFraction of the samples, that the sheet pass may
 // turn on a piece open by its flux (OrientNormals).
 constexpr std::size_t kOpenSheetFraction = 4;
+// ... on a piece whose flux is at most this fraction of its area: turning a sheet of up to a
+// quarter of its samples changes the flux by up to half the area, so a piece above 0.1 + 0.5 is
+// open whatever one such sheet's sign (an aerial or one-sided scan: 0.x; the trial cost
+// b9_training 11 -> 28 s without this gate, for no change).
+constexpr double kOpenSheetMostFlux = kSheetClosedFlux + 2.0 / static_cast<double>(kOpenSheetFraction);
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -828,26 +833,22 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     // closes (flux under kSheetClosedFlux): an open scan's flux is its opening's, which no sign of
     // its sheets removes (b9_training, hippo1, building, half.xyz: unchanged).
     std::vector<std::uint8_t> open_piece(n, 0);
-    bool any_open = false;
-    for (std::size_t i = 0; i < n; ++i) {
-      open_piece[i] = closed[i] != 0 ? 0 : 1;
-      any_open = any_open || open_piece[i] != 0;
-    }
-    if (any_open) {
-      std::vector<V3> trial = normals;
-      std::size_t trial_sheets = 0;
-      if (FlipSheetsByWinding(positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
-        std::vector<V3> after(pieces, V3::Zero());
-        for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
-        std::vector<std::uint8_t> closes(pieces, 0);
-        for (std::size_t i = 0; i < n; ++i) {
-          const std::uint32_t c = component[i];
-          if (open_piece[i] == 0 || !(after[c].norm() < kSheetClosedFlux * area[c])) continue;
-          if (closes[c] == 0) ++report.closed_by_sheets;
-          closes[c] = 1;
-          if (trial[i].dot(normals[i]) < 0) ++report.closed_by_sheets_samples;
-          normals[i] = trial[i];
-        }
+    for (std::size_t i = 0; i < n; ++i)
+      open_piece[i] = closed[i] == 0 && now[component[i]].norm() <= kOpenSheetMostFlux * area[component[i]];
+    std::vector<V3> trial = normals;
+    std::size_t trial_sheets = 0;
+    if (std::find(open_piece.begin(), open_piece.end(), 1) != open_piece.end() &&
+        FlipSheetsByWinding(positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
+      std::vector<V3> after(pieces, V3::Zero());
+      for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
+      std::vector<std::uint8_t> stands(pieces, 0);  // an open piece the trial closes
+      for (std::size_t i = 0; i < n; ++i)
+        stands[component[i]] = open_piece[i] != 0 && after[component[i]].norm() < kSheetClosedFlux * area[component[i]];
+      report.closed_by_sheets = static_cast<std::size_t>(std::count(stands.begin(), stands.end(), 1));
+      for (std::size_t i = 0; i < n; ++i) {
+        if (stands[component[i]] == 0) continue;
+        if (trial[i].dot(normals[i]) < 0) ++report.closed_by_sheets_samples;
+        normals[i] = trial[i];
       }
     }
   }

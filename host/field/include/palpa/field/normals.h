@@ -173,7 +173,9 @@ std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, s
 /// sign, then each given normal takes the sign of its oriented jet normal, then FlipInvertedParts
 /// over all samples. `keep_file_majority` (orient mode) decides open components by the majority of
 /// the signs given; without it an open component whose mean winding level (SampleProbes::Levels, by area)
-/// is below 0 is reversed, and FlipSheetsByWinding runs last. `given_are_jet_lines`: the normals are
+/// is below 0 is reversed, and FlipSheetsByWinding runs last: on closed pieces, then on pieces
+/// open by their flux (at most 0.6 of the area) with sheets of up to n / 4, kept where it closes
+/// them (a sheet the tree turned inward as a whole). `given_are_jet_lines`: the normals are
 /// EstimateNormalLines' already (estimate mode; not fitted twice). Unit normals in, same lines out. Counts into
 /// `report` (flipped, components, open_components, open_level_flipped, inverted_parts, inverted_samples, sheets,
 /// sheet_samples). O(n log n); parallel and deterministic.
