@@ -1094,11 +1094,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       float* values = field.BrickValues(b);
       node.clear();
       at.clear();
-      // Every node's trilinear w is a convex combination of the corners' (weights k/8 products,
-      // exact), computed with 11 roundings of at most 2^-24 each: with all corners in (0.5001, 2)
-      // it is >= 1/2 at every node, with all in (-1, 0.4999) below 1/2; the filter then needs no sum.
-      const bool all_in = std::all_of(cw.begin(), cw.end(), [](float x) { return x > 0.5001f && x < 2.0f; });
-      const bool all_out = std::all_of(cw.begin(), cw.end(), [](float x) { return x < 0.4999f && x > -1.0f; });
+      // The filter interpolates the corners' w clamped to [0, 1]: a corner within about a spacing of
+      // a sample can read far outside it (the dipole sum's singularity; couplingdown, clean, seed 2:
+      // -2.36), which pulled a node 3.6 voxels inside a thick part, w 0.77, to 0.30 and left a
+      // hole there. Every node's trilinear w is a convex combination of the clamped corners'
+      // (weights k/8 products, exact), computed with 11 roundings of at most 2^-24 each: with all
+      // corners above 0.5001 it is >= 1/2 at every node, with all below 0.4999 below 1/2; the
+      // filter then needs no sum.
+      const bool all_in = std::all_of(cw.begin(), cw.end(), [](float x) { return x > 0.5001f; });
+      const bool all_out = std::all_of(cw.begin(), cw.end(), [](float x) { return x < 0.4999f; });
       for (int a = 0; a < kB; ++a)
         for (int c = 0; c < kB; ++c) {
           // Trilinear w from the brick corners: a cheap first filter (exact w below). The sum over
@@ -1110,7 +1114,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             const float u = static_cast<float>(a) / kB, v = static_cast<float>(c) / kB;
             std::array<float, 8> row{};
             for (std::size_t q = 0; q < 8; ++q)
-              row[q] = cw[q] * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
+              row[q] = std::clamp(cw[q], 0.0f, 1.0f) * ((q & 4) != 0 ? u : 1.0f - u) * ((q & 2) != 0 ? v : 1.0f - v);
             for (std::size_t q = 0; q < 8; ++q)
               for (std::size_t e = 0; e < kB; ++e) wi[e] += row[q] * t_weight[q & 1][e];
           }
