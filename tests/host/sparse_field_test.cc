@@ -245,6 +245,23 @@ TEST(LabelUnallocatedBricks, HollowBallCavityIsOutside) {
 
 // SmoothBand's [1 2 1] / 4 per axis: exact on a linear field, and node noise of RMS e left at
 // e * (6/16)^(3/2) = 0.23 e (the kernel's sum of squared weights).
+// The payload's rounding (Q16.16 voxels, nearest, halves away from 0) never turns a node outside
+// into 0, which readers take for the surface and `palpa eval` for inside: the build's side
+// decisions keep outside nodes at 1e-6 voxel, 0.066 of the last place. CGAL's dino with 500
+// samples had such a node 30 voxels from its surface (the v2 blob then rounded it to 0 too).
+TEST(WriteQ16, NodesOutsideStayOutside) {
+  const float values[] = {1e-6f, 7.6e-6f, 7.7e-6f, 1e-3f, 0.0f, -0.0f, -1e-6f, -7.7e-6f, 1.0f, -1.0f};
+  const std::int32_t want[] = {1, 1, 1, 66, 0, 0, 0, -1, 65536, -65536};
+  const GridSpec g = Grid(10, 1, 1, 6);
+  const SparseField f = AllAllocated(g, [&](int i, int, int) { return values[i]; });
+  std::vector<std::int32_t> dense(10);
+  f.WriteQ16(dense);
+  for (int i = 0; i < 10; ++i) {
+    EXPECT_EQ(f.ValueQ16(i, 0, 0), want[i]) << values[i];
+    EXPECT_EQ(dense[static_cast<std::size_t>(i)], want[i]) << values[i];
+  }
+}
+
 TEST(SmoothBand, KeepsALinearFieldAndAveragesNodeNoise) {
   const GridSpec g = Grid(24, 24, 24, 6);
   std::mt19937 rng(7);

@@ -98,6 +98,21 @@ TEST(BlobV2, RoundTripStoresTheQuantisedClampedField) {
       }
 }
 
+// Q16.16 -> Q7.8 rounds to nearest, ties up, except that a value outside (> 0) stays outside at
+// 1/256 voxel at least: rounded to 0 a reader takes it for the surface and `palpa eval` for
+// inside. Expected values worked by hand in 1/256 voxel.
+TEST(BlobV2, ValuesOutsideStayOutside) {
+  const std::int32_t in[] = {1, 127, 128, 383, 384, 0, -1, -128, -129, -384, -385, 2 * 65536};
+  const std::int32_t want[] = {1, 1, 1, 1, 2, 0, 0, 0, -1, -1, -2, 512};
+  // 12 x 2 x 2 nodes (each axis needs 2), the same value along j and k.
+  SphereGrid g{{12, 2, 2}, {0, 0, 0}, 0, {}};
+  for (const std::int32_t x : in) g.q16.insert(g.q16.end(), 4, x);
+  const auto bytes = EncodeV2(Meta(g, 6, 2, false), g.q16);
+  const auto v = Verify(bytes);
+  ASSERT_TRUE(v.has_value()) << v.error().what();
+  for (std::int32_t i = 0; i < 12; ++i) EXPECT_EQ(v->NodeQ16(i, 1, 1), want[i] * 256) << in[i];
+}
+
 // The brick-wise encoder (palpa build's, from a sparse field) against the dense one on a field with
 // uniform bricks inside, outside and at the grid's edge: the same bytes, whether a uniform brick
 // is handed over as one value or as 512.

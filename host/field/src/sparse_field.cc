@@ -21,11 +21,14 @@ namespace {
 
 // The blob payload's rounding (WriteQ16): nearest, halves away from 0 (std::lround), clamped to
 // the band. v · 2^16 and that ± 1/2 are exact in double for |v| < 2^30 (a float has 24 bits), so
-// truncating the sum is lround's result at a third of its cost (a third of v2 encoding's).
+// truncating the sum is lround's result at a third of its cost (a third of v2 encoding's). A
+// node outside (v > 0) stays outside: it rounds to at least 1, never to 0, which readers take
+// for the surface and `palpa eval` for inside (the build's side decisions keep 1e-6 voxel).
 std::int32_t Q16(float v, std::int32_t band_q) {
   const double band = static_cast<double>(band_q);
   const double x = std::clamp(static_cast<double>(v) * 65536.0, -band, band);
-  return static_cast<std::int32_t>(x + (x < 0.0 ? -0.5 : 0.5));
+  const auto q = static_cast<std::int32_t>(x + (x < 0.0 ? -0.5 : 0.5));
+  return x > 0.0 ? std::max(q, std::int32_t{1}) : q;
 }
 
 constexpr int kB = SparseField::kBrick;

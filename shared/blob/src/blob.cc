@@ -481,8 +481,12 @@ std::vector<std::byte> EncodeV2(const BlobMetaV2& m, BrickSource bricks, const P
   const auto n_slots = static_cast<std::size_t>(slots);
   const std::int32_t lo = -static_cast<std::int32_t>(m.band_inside) << 16;
   const std::int32_t hi = static_cast<std::int32_t>(m.band_outside) << 16;
-  // Q16.16 -> Q7.8 within the band: nearest, ties up.
-  const auto quantise = [&](std::int32_t v) { return static_cast<std::int16_t>((std::clamp(v, lo, hi) + 128) >> 8); };
+  // Q16.16 -> Q7.8 within the band: nearest, ties up; a value outside (> 0) stays outside, at
+  // least 1/256 voxel (rounded to 0 it would read as the surface, or inside where 0 counts so).
+  const auto quantise = [&](std::int32_t v) {
+    const std::int32_t q = (std::clamp(v, lo, hi) + 128) >> 8;
+    return static_cast<std::int16_t>(v > 0 ? std::max(q, std::int32_t{1}) : q);
+  };
   const std::array<std::size_t, 3> dims = {h.dims[0], h.dims[1], h.dims[2]};
   std::vector<std::uint32_t> index(n_slots);
   // Each plane of bricks (one bi) is encoded on its own, its stored bricks numbered from 0 and

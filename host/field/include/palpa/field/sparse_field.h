@@ -107,7 +107,8 @@ class SparseField {
   // O(allocated bricks); parallel, deterministic.
   void SmoothBand();
   LipschitzStats ProjectLipschitz();
-  // Writes phi as Q16.16 voxels (round to nearest) for every node into `dense` (NodeCount()
+  // Writes phi as Q16.16 voxels (round to nearest; phi > 0 to 1 at least: outside stays outside,
+  // never the surface's 0) for every node into `dense` (NodeCount()
   // values, C order), in parallel over i-planes. This is the blob v1 payload.
   void WriteQ16(std::span<std::int32_t> dense) const;
   // phi at node (i, j, k) as WriteQ16 writes it: Q16.16 voxels, nearest, within +-band.

@@ -178,7 +178,8 @@ struct BlobMetaV2 {
 };
 
 /// Encodes a v2 blob from a dense field (nx·ny·nz Q16.16 voxels, C order, k fastest): values are
-/// clamped to [−band_inside, +band_outside] and rounded to Q7.8 (nearest, ties up). A brick whose
+/// clamped to [−band_inside, +band_outside] and rounded to Q7.8 (nearest, ties up; a value > 0
+/// stores at least 1/256 voxel, so that a node outside never reads as the surface). A brick whose
 /// nodes all agree becomes a uniform slot; in the others, each octant whose nodes all agree
 /// becomes a uniform table entry and the rest are stored. Uniform slots at +band_outside then get
 /// the free-space bound (docs/blob-format.md). Non-RT; the result verifies if `meta` is in range.
