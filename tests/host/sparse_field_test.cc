@@ -243,8 +243,6 @@ TEST(LabelUnallocatedBricks, HollowBallCavityIsOutside) {
   EXPECT_EQ(wrong, 0u);
 }
 
-// SmoothBand's [1 2 1] / 4 per axis: exact on a linear field, and node noise of RMS e left at
-// e * (6/16)^(3/2) = 0.23 e (the kernel's sum of squared weights).
 // The payload's rounding (Q16.16 voxels, nearest, halves away from 0) never turns a node outside
 // into 0, which readers take for the surface and `palpa eval` for inside: the build's side
 // decisions keep outside nodes at 1e-6 voxel, 0.066 of the last place. CGAL's dino with 500
@@ -262,6 +260,8 @@ TEST(WriteQ16, NodesOutsideStayOutside) {
   }
 }
 
+// SmoothBand's [1 2 1] / 4 per axis: exact on a linear field, and node noise of RMS e left at
+// e * (6/16)^(3/2) = 0.23 e (the kernel's sum of squared weights).
 TEST(SmoothBand, KeepsALinearFieldAndAveragesNodeNoise) {
   const GridSpec g = Grid(24, 24, 24, 6);
   std::mt19937 rng(7);

@@ -107,9 +107,9 @@ class SparseField {
   // O(allocated bricks); parallel, deterministic.
   void SmoothBand();
   LipschitzStats ProjectLipschitz();
-  // Writes phi as Q16.16 voxels (round to nearest; phi > 0 to 1 at least: outside stays outside,
-  // never the surface's 0) for every node into `dense` (NodeCount()
-  // values, C order), in parallel over i-planes. This is the blob v1 payload.
+  // Writes phi as Q16.16 voxels for every node into `dense` (NodeCount() values, C order), in
+  // parallel over i-planes: nearest, but phi > 0 to 1 at least (outside stays outside, never the
+  // surface's 0). This is the blob v1 payload.
   void WriteQ16(std::span<std::int32_t> dense) const;
   // phi at node (i, j, k) as WriteQ16 writes it: Q16.16 voxels, nearest, within +-band.
   std::int32_t ValueQ16(int i, int j, int k) const;
