@@ -1220,10 +1220,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // side, a stray sample near the edge). A face node at or below 0 is set outside; the Lipschitz
   // projection then puts the surface within a voxel of the face. So is one outside by less than
   // kFaceMinOutsideVoxels, uncounted: next to an inside node the projection scales it down
-  // (a / (a + b) of its value), and a few thousandths of a voxel round to 0, inside, in the blob
-  // (v2 keeps 1/256 voxel): CGAL's bear_bis scanned from 6 views had a face node at 6e-6 voxel.
-  // Set to the band, a face node ends at least half a voxel outside after the projection
-  // (band / (band + b) next to an inside node at -b, b <= band).
+  // (a / (a + b) of its value); CGAL's bear_bis scanned from 6 views had a face node at 6e-6 voxel,
+  // which the blob then rounded to 0, inside (the payloads have kept positive values positive
+  // since, SparseField::WriteQ16 and blob::EncodeV2). Set to the band, a face node ends at least
+  // half a voxel outside after the projection (band / (band + b) next to an inside node at -b,
+  // b <= band): the closure's surface stays inside the grid by that much.
   std::size_t closed = 0;
   std::vector<std::array<int, 3>> cut;  // the face nodes set outside
   const std::array<int, 3> dims = grid.dims;

@@ -178,7 +178,7 @@ std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, s
 /// them (a sheet the tree turned inward as a whole). `given_are_jet_lines`: the normals are
 /// EstimateNormalLines' already (estimate mode; not fitted twice). Unit normals in, same lines out. Counts into
 /// `report` (flipped, components, open_components, open_level_flipped, inverted_parts, inverted_samples, sheets,
-/// sheet_samples). O(n log n); parallel and deterministic.
+/// sheet_samples, closed_by_sheets, closed_by_sheets_samples). O(n log n); parallel and deterministic.
 void OrientNormals(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                    bool keep_file_majority, NormalsReport& report, bool given_are_jet_lines = false);
 
