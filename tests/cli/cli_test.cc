@@ -206,6 +206,20 @@ void ExpectNoFarWrongAndMeanBelow(const Outcome& e, double max_mean) {
   EXPECT_LT(std::stod(e.out.substr(mean + 17)), max_mean) << e.out;
 }
 
+// `palpa sample MESH -n COUNT --seed SEED`, `palpa build` with defaults at 150 cells, then
+// `palpa eval --json` of the field against MESH (a bundled mesh's file name); the files are
+// STEM.xyz and STEM.palpa. Eval's outcome, or the first step's that failed.
+Outcome SampleBuildEval(const std::string& mesh_file, int count, int seed, const std::string& stem) {
+  const std::string mesh = std::string(PALPA_DATA_DIR) + "/" + mesh_file;
+  const std::string points = stem + ".xyz", field = stem + ".palpa";
+  const Outcome s = Palpa("sample " + mesh + " -n " + std::to_string(count) + " --seed " + std::to_string(seed) +
+                          " -o " + points + " -q");
+  if (s.code != 0) return s;
+  const Outcome b = Palpa("build " + points + " -o " + field + " --cells 150 -q");
+  if (b.code != 0) return b;
+  return Palpa("eval " + field + " --mesh " + mesh + " --json");
+}
+
 // Issue 20: samples denser than the grid are averaged per cell before the build, and the build
 // says so; the field stays within a tenth of a voxel of the true sphere (palpa eval), with no far
 // wrong sign. 60,000 samples on a 48-cell grid: ~25 samples a cell.
@@ -228,11 +242,7 @@ TEST_F(Cli, DenseScansAreThinnedToTheGridAndSaySo) {
 // beside a sample, where the dipole sum reads -2.36, and the filter skipped the node. The corners
 // are now clamped to [0, 1].
 TEST_F(Cli, CleanCouplingHasNoWrongSignFarFromTheSurface) {
-  const std::string mesh = std::string(PALPA_DATA_DIR) + "/couplingdown.off";
-  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 2 -o " + Path("c.xyz") + " -q").code, 0);
-  const Outcome b = Palpa("build " + Path("c.xyz") + " -o " + Path("c.palpa") + " --cells 150 -q");
-  ASSERT_EQ(b.code, 0) << b.out;
-  ExpectNoFarWrongAndMeanBelow(Palpa("eval " + Path("c.palpa") + " --mesh " + mesh + " --json"), 0.1);
+  ExpectNoFarWrongAndMeanBelow(SampleBuildEval("couplingdown.off", 5000, 2, Path("c")), 0.1);
 }
 
 // Issue 20, sparse samples through `palpa build` defaults: the cow with 500 samples (seed 2) had 55
@@ -241,11 +251,7 @@ TEST_F(Cli, CleanCouplingHasNoWrongSignFarFromTheSurface) {
 // share that close to it. With the nearest samples' dipoles spread over their discs, w reads below
 // 0.2 there and the far pass puts the node outside (LabelByWinding, kDiscOutside): 18 left.
 TEST_F(Cli, SparseCowPhantomsGoWhereTheDiscSpreadWindingNumberIsClearlyOutside) {
-  const std::string mesh = std::string(PALPA_DATA_DIR) + "/cow.off";
-  ASSERT_EQ(Palpa("sample " + mesh + " -n 500 --seed 2 -o " + Path("cow.xyz") + " -q").code, 0);
-  const Outcome b = Palpa("build " + Path("cow.xyz") + " -o " + Path("cow.palpa") + " --cells 150 -q");
-  ASSERT_EQ(b.code, 0) << b.out;
-  const Outcome e = Palpa("eval " + Path("cow.palpa") + " --mesh " + mesh + " --json");
+  const Outcome e = SampleBuildEval("cow.off", 500, 2, Path("cow"));
   ASSERT_EQ(e.code, 0) << e.out;
   const auto phantom = e.out.find("\"phantom_solid\":{\"nodes\":");
   ASSERT_NE(phantom, std::string::npos) << e.out;

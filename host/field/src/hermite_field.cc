@@ -1073,6 +1073,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       if (normals[idx[m]].dot(out) > kCapCos) return true;
     return false;
   };
+  // A node the far pass set outside is an open side's cut at a grid face when w is still a tenth
+  // or more there, as near an open side's closing surface (a thin open plate cut by its grid:
+  // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a few
+  // hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
+  const auto open_face_cut = [&](int i, int j, int k, const V3& p, double w) {
+    return w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p);
+  };
   const double trust = std::max(kTrustVoxels * h, kTrustSpacings * detail::Median(spacing));
   // For the order-free searches below: any sample within trust, the nearest distance.
   const PointCloud cloud{&positions};
@@ -1171,10 +1178,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           wide.knnSearch(p.data(), 1, &nearest, &nearest2);
           x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(nearest2) / h)));
           ++local;
-          // An open side's cut at a grid face, counted as below (a thin open plate: its slab's
-          // spread w is below kDiscOutside where it meets the face).
-          const int i = bi * kB + a, j = bj * kB + c, k = bk * kB + e;
-          if (w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p)) ++face_local;
+          // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
+          if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
           continue;
         }
         if ((w >= 0.5) == (x <= 0.0f)) continue;
@@ -1245,12 +1250,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
         ++local;
-        // The local estimate reached a grid face where w says outside. Near an open side's
-        // closing surface w is still a tenth or more there (a thin open plate cut by its grid:
-        // 0.08-0.21), reported as the face pass below would; beside a closed surface it is a
-        // few hundredths (a phantom of the estimate: bull, cow 0.00-0.05), not an open scan.
-        const int i = bi * kB + a, j = bj * kB + c, k = bk * kB + e;
-        if (w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p)) ++face_local;
+        if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
       }
     }
     far_flipped += local;
