@@ -831,6 +831,42 @@ TEST(FindWindingOutliers, AFlippedNormalIsAnOutlier) {
   EXPECT_LT(found.worst_jump, 0.0);
 }
 
+// A wall thinner than the spacing whose one side is a narrow strip (a flange's top face, as on
+// the spool): of each strip sample's 16 nearest, 2 lie on the strip and 14 on the wide side,
+// facing away, each behind the other's tangent plane. Those support it as its own side's samples
+// would (the spool's clean 5,000 samples lost 43 before, and the wide side's inner balls filled
+// the flange's concave corner with phantom solid); the strip's two end samples, with one strip
+// neighbour each, stay stray (an outlier buried under a surface, facing into it, has the surface
+// behind it too, but none of its own side). A flipped normal on a convex or a concave sheet is
+// still stray: its neighbours lie on or in front of its plane, or it in front of theirs.
+TEST(FindStraySamples, TheNarrowSideOfAThinWallIsKeptAndFlippedNormalsAreNot) {
+  Oriented wall;
+  for (int a = 0; a < 40; ++a)
+    for (int b = 0; b < 40; ++b) {
+      wall.positions.emplace_back(a, b, 0.0);
+      wall.normals.emplace_back(0, 0, -1);
+    }
+  const std::size_t strip = wall.positions.size();
+  constexpr std::size_t kStrip = 20;
+  for (std::size_t t = 0; t < kStrip; ++t) {
+    wall.positions.emplace_back(5.0 + 1.5 * static_cast<double>(t), 20.5, 0.3);
+    wall.normals.emplace_back(0, 0, 1);
+  }
+  const StraySamples kept = FindStraySamples(wall.positions, wall.normals);
+  for (const std::size_t i : kept.indices)
+    EXPECT_TRUE(i < strip || i == strip || i == strip + kStrip - 1)
+        << "a sample inside the strip was taken for a stray one: " << i - strip;
+
+  for (const double side : {1.0, -1.0}) {  // a ball, then a ball-shaped cavity (normals inward)
+    Oriented sheet = Sphere(3000, 1.0);
+    for (V3& normal : sheet.normals) normal *= side;
+    sheet.normals[1234] = -sheet.normals[1234];
+    const StraySamples found = FindStraySamples(sheet.positions, sheet.normals);
+    ASSERT_EQ(found.indices.size(), 1u) << side;
+    EXPECT_EQ(found.indices[0], 1234u) << side;
+  }
+}
+
 }  // namespace
 }  // namespace palpa::field
 

@@ -118,7 +118,7 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
         // Each behind the other: the two sides of a wall thinner than the spacing (an ear), whose
         // normals point apart. A flipped normal on one smooth sheet has a neighbour on its own
         // tangent plane, or in front of it where the sheet is convex.
-        if (a < -kWallSin && b > kWallSin) continue;
+        if (detail::EachBehindTheOther(chord, normals[i], normals[j], kWallSin)) continue;
         ++counts[i].first;
         if (normals[i].dot(normals[j]) < kOppositeCos) {
           ++counts[i].second;

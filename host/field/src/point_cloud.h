@@ -87,6 +87,17 @@ TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const
 void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
                     std::vector<Eigen::Vector3d>& normals);
 
+// Whether P_i and P_j, chord = P_j - P_i (not zero), each lie behind the other's tangent plane
+// (unit normals n_i, n_j) by more than `min_sin` of the chord: the two sides of a wall thinner
+// than the spacing (an ear, a flange). A flipped normal's neighbour on its own smooth sheet lies
+// on its tangent plane, or in front of it where the sheet is convex, or has it in front of its
+// own where the sheet is concave (orientation.cc's flat pairs, samples.cc's stray test).
+inline bool EachBehindTheOther(const Eigen::Vector3d& chord, const Eigen::Vector3d& n_i, const Eigen::Vector3d& n_j,
+                               double min_sin) {
+  const double length = chord.norm();
+  return n_i.dot(chord) < -min_sin * length && n_j.dot(chord) > min_sin * length;
+}
+
 // The median of `values` (the upper one of an even count), 0 when there are none: the one scale
 // of a sample set (spacing, noise) that a few outliers cannot move.
 inline double Median(std::vector<double> values) {
