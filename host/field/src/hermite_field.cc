@@ -1092,20 +1092,25 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const bool closed_set = ClosedSet(normals, areas, rim);
   const std::vector<double> levels =
       closed_set ? SampleProbes(positions, normals).Levels(normals) : std::vector<double>{};
-  // w with the nearest samples' dipoles spread over their discs (radius sqrt(a_i / pi)) instead:
-  // a point dipole's 1/r^2 overstates a sparse sample's share within a spacing of it.
+  // The change to w when the nearest samples' dipoles are spread over their discs (radius
+  // sqrt(a_i / pi)): a point dipole's 1/r^2 overstates a sparse sample's share within a spacing
+  // of it. Also the nearest sample's squared distance, from the same search.
+  struct NearDiscs {
+    double change = 0.0;
+    double nearest2 = 0.0;
+  };
   const auto near_discs = [&](const V3& p) {
     std::array<std::size_t, kDiscNeighbours> idx{};
     std::array<double, kDiscNeighbours> d2{};
     const std::size_t got = wide.knnSearch(p.data(), kDiscNeighbours, idx.data(), d2.data());
-    double sum = 0.0;
+    NearDiscs out{0.0, got > 0 ? d2[0] : 0.0};
     for (std::size_t m = 0; m < got; ++m) {
       if (d2[m] <= 0.0) continue;
       const double an = areas[idx[m]] * normals[idx[m]].dot(positions[idx[m]] - p) / (4.0 * std::numbers::pi);
       const double disc2 = d2[m] + areas[idx[m]] / std::numbers::pi;
-      sum += an * (1.0 / (disc2 * std::sqrt(disc2)) - 1.0 / (d2[m] * std::sqrt(d2[m])));
+      out.change += an * (1.0 / (disc2 * std::sqrt(disc2)) - 1.0 / (d2[m] * std::sqrt(d2[m])));
     }
-    return sum;
+    return out;
   };
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
@@ -1172,15 +1177,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         float& x = values[node[f]];
         const V3& p = at[f];
         const double w = wn[f];
-        if (closed_set && x <= 0.0f && w < kDiscPointMax && w + near_discs(p) < kDiscOutside && !rule.Inside(w, p)) {
-          std::size_t nearest = 0;
-          double nearest2 = 0.0;
-          wide.knnSearch(p.data(), 1, &nearest, &nearest2);
-          x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(nearest2) / h)));
-          ++local;
-          // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
-          if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
-          continue;
+        if (closed_set && x <= 0.0f && w < kDiscPointMax) {
+          const NearDiscs discs = near_discs(p);
+          if (w + discs.change < kDiscOutside && !rule.Inside(w, p)) {
+            x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(discs.nearest2) / h)));
+            ++local;
+            // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
+            if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
+            continue;
+          }
         }
         if ((w >= 0.5) == (x <= 0.0f)) continue;
         std::size_t idx = 0;

@@ -87,7 +87,7 @@ TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const
 void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
                     std::vector<Eigen::Vector3d>& normals);
 
-// Whether P_i and P_j, chord = P_j - P_i (not zero), each lie behind the other's tangent plane
+// Whether P_i and P_j, chord = P_j - P_i (false when zero), each lie behind the other's tangent plane
 // (unit normals n_i, n_j) by more than `min_sin` of the chord: the two sides of a wall thinner
 // than the spacing (an ear, a flange). A flipped normal's neighbour on its own smooth sheet lies
 // on its tangent plane, or in front of it where the sheet is convex, or has it in front of its

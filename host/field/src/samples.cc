@@ -170,7 +170,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
         const Eigen::Vector3d chord = positions[j] - positions[i];
         if (normals[j].dot(normals[i]) > 0.0)
           ++agree;
-        else if (chord.squaredNorm() > 0.0 && detail::EachBehindTheOther(chord, normals[i], normals[j], kWallSin))
+        else if (detail::EachBehindTheOther(chord, normals[i], normals[j], kWallSin))
           ++wall;
       }
       // The other side of a wall thinner than the spacing supports P as its own side does: a
