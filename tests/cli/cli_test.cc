@@ -252,7 +252,8 @@ TEST_F(Cli, DenseScansAreThinnedToTheGridAndSaySo) {
 // (FindStraySamples), one sample at the foot of a fin, 0.4 voxel above the floor, is kept, and its
 // plane, carried past the concave edge by the blend, left one node 3.4 voxels under the floor
 // (4.4 voxels from every sample) outside: w is 0.71 there, but the corners of its brick, outside
-// the fin, interpolate to 0.46. The filter now passes nodes within kFilterMargin of 1/2.
+// the fin, interpolate to 0.46. The filter now passes a node held outside whose interpolated w
+// is under 1/2 by less than kFilterMargin.
 // docs/field-methods.md § The far pass's filter near 1/2 and CAD parts' rims.
 TEST_F(Cli, CleanCouplingHasNoWrongSignFarFromTheSurface) {
   ExpectNoFarWrongAndMeanBelow(SampleBuildEval("couplingdown.off", 5000, 2, Path("c")), 0.1);
