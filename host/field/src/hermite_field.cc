@@ -67,12 +67,11 @@ constexpr std::size_t kLevelNeighbours = 8;
 // through the samples, is the better (sphere926 at 300 cells: without it, max error 0.04 -> 0.27
 // voxel near the surface between its 926 samples).
 constexpr double kLevelMinVoxels = 1.0;
-// A set is closed when its normals' flux |sum_i a_i n_i| is under kClosedFlux of its area (0 for
-// a closed surface, by the divergence theorem: 0.003-0.078 on 40 sparse and outlier draws of 8
-// closed meshes, 0.14-0.51 on their open and range scans; FlipSheetsByWinding's gate, normals.cc)
+// A set is closed when its normals' flux |sum_i a_i n_i| is under detail::kClosedFlux of its area
+// (0.003-0.078 on 40 sparse and outlier draws of 8 closed meshes, 0.14-0.51 on their open and
+// range scans; FlipSheetsByWinding's gate too, normals.cc)
 // and its rim samples (RimSamples) are fewer than kClosedRims sqrt(n) (sparse closed sets 0-5,
 // open and range scans 0.8-3.3 sqrt(n); oni, open at its neck but of flux 0.067, 29 = 0.77 sqrt(n)).
-constexpr double kClosedFlux = 0.1;
 constexpr double kClosedRims = 0.4;
 // ... or, whatever its rims, when its flux is under kSureClosedFlux: the rim test also flags the
 // sampling gaps along a clean CAD part's sharp edges (5,000 samples: P 0.69 sqrt(n), anchor 0.50,
@@ -801,8 +800,8 @@ bool GuardEndsPart(const V3& p, const V3& guard, double guard_d2, const std::vec
   return true;
 }
 
-// Whether the samples make a closed set (kClosedFlux, kClosedRims): their normals' flux and their
-// rim samples (RimSamples) are few. `areas` as the winding number's, `rim` 0 or 1; same sizes.
+// Whether the samples make a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): their normals' flux and
+// their rim samples (RimSamples) are few. `areas` as the winding number's, `rim` 0 or 1; same sizes.
 bool ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas, const std::vector<std::uint8_t>& rim) {
   V3 flux = V3::Zero();
   double area = 0.0;
@@ -812,7 +811,8 @@ bool ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas,
   }
   const auto rims = static_cast<double>(std::count(rim.begin(), rim.end(), std::uint8_t{1}));
   if (flux.norm() < kSureClosedFlux * area) return true;
-  return flux.norm() < kClosedFlux * area && rims < kClosedRims * std::sqrt(static_cast<double>(normals.size()));
+  return flux.norm() < detail::kClosedFlux * area &&
+         rims < kClosedRims * std::sqrt(static_cast<double>(normals.size()));
 }
 
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
@@ -1104,6 +1104,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // sparse or thin part), for the unclear nodes below; on closed sets only (an open side's
   // closure has w below the sampled surface's level all over).
   const bool closed_set = ClosedSet(normals, areas, rim);
+  // The far pass's filter passes a node held inside whose interpolated w is under this: 1/2, and
+  // on a closed set kDiscPointMax (the disc rule examines it).
+  const float inside_min = closed_set ? kDiscPointMax : 0.5f;
   const std::vector<double> levels =
       closed_set ? SampleProbes(positions, normals).Levels(normals) : std::vector<double>{};
   // The change to w when the nearest samples' dipoles are spread over their discs (radius
@@ -1173,11 +1176,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           }
           for (int e = 0; e < kB; ++e) {
             const float x = values[(a * kB + c) * kB + e];
-            // On a closed set a node inside with w below kDiscPointMax is examined too (the disc rule).
+            // Skipped where the filter's w agrees with the estimate clearly enough: held inside, w
+            // at least inside_min; held outside, w under 1/2 - kFilterMargin.
             const float we = wi[static_cast<std::size_t>(e)];
-            if ((we >= 0.5f) == (x <= 0.0f) && (x <= 0.0f || we < 0.5f - kFilterMargin) &&
-                !(closed_set && x <= 0.0f && we < kDiscPointMax))
-              continue;
+            if (x <= 0.0f ? we >= inside_min : we < 0.5f - kFilterMargin) continue;
             const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
             AnyWithin near(trust);  // the nearest sample within trust?
             wide.findNeighbors(near, p.data(), nanoflann::SearchParams());
@@ -1207,11 +1209,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
-          // w unclear and against the estimate, on a closed set (kClosedFlux, kClosedRims). The
-          // estimate inside and w below the surface's own level here (LocalLevel), away from
-          // rim samples (beside its few rims, a part's unsampled end, the rims' balls close as on
-          // an open side: w low is no evidence), or the estimate outside and w above 1/2 (the
-          // level is no higher; w above 1/2 is inside beside a rim too):
+          // w unclear and against the estimate, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims).
+          // The estimate inside and w below the surface's own level here (LocalLevel), away from rim samples (beside
+          // its few rims, a part's unsampled end, the rims' balls close as on an open side: w low is no evidence), or
+          // the estimate outside and w above 1/2 (the level is no higher; w above 1/2 is inside beside a rim too):
           // where w's surface at that level is farther from the node than the estimate's own and
           // than kLevelMinVoxels (first order: |level - w| / |grad w|, central differences over a
           // voxel), w's side stands. The estimate had carried patches and balls on past their

@@ -22,7 +22,6 @@ constexpr std::size_t kSupportPoints = 8;
 constexpr std::size_t kNeighbours = 8;
 constexpr double kFlatSin = 0.17364817766693033;  // sin(10 degrees)
 constexpr double kOppositeCos = -0.5;
-constexpr double kWallSin = 0.034899496702500969;  // sin(2 degrees)
 constexpr double kFlippedFraction = 0.01;
 // An open scan: the side a single scanner never saw makes up to 9 of the 26 directions "inward"
 // (consistent range scans, 1-6 views of knot1, fandisk, sphere, cow: 0-9, with 0-1 flipped pairs
@@ -118,7 +117,7 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
         // Each behind the other: the two sides of a wall thinner than the spacing (an ear), whose
         // normals point apart. A flipped normal on one smooth sheet has a neighbour on its own
         // tangent plane, or in front of it where the sheet is convex.
-        if (detail::EachBehindTheOther(chord, normals[i], normals[j], kWallSin)) continue;
+        if (detail::EachBehindTheOther(chord, normals[i], normals[j], detail::kThinWallSin)) continue;
         ++counts[i].first;
         if (normals[i].dot(normals[j]) < kOppositeCos) {
           ++counts[i].second;

@@ -87,6 +87,16 @@ TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const
 void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
                     std::vector<Eigen::Vector3d>& normals);
 
+// EachBehindTheOther's `min_sin` for the flat-pair test (orientation.cc) and the stray test
+// (samples.cc): sin(2 degrees), so that neighbours on one flat sheet, noise aside, are not a wall.
+inline constexpr double kThinWallSin = 0.034899496702500969;
+
+// A sample set, or a piece of one, is closed when its normals' flux |sum_i a_i n_i| is under this
+// fraction of its area (0 for a closed surface, by the divergence theorem): 0.001-0.078 on closed
+// meshes' sparse, outlier and estimated-normal draws, 0.14-0.51 on their open and range scans.
+// Used by FlipSheetsByWinding (normals.cc) and LabelByWinding's ClosedSet (hermite_field.cc).
+inline constexpr double kClosedFlux = 0.1;
+
 // Whether P_i and P_j, chord = P_j - P_i (false when zero), each lie behind the other's tangent plane
 // (unit normals n_i, n_j) by more than `min_sin` of the chord: the two sides of a wall thinner
 // than the spacing (an ear, a flange). A flipped normal's neighbour on its own smooth sheet lies

@@ -108,12 +108,11 @@ constexpr std::size_t kSpacingNeighbour = 8;
 constexpr double kNoiseFactor = 4.0;
 constexpr double kOffsetSpacings = 0.5;
 constexpr double kIsolatedSpacings = 1.5;
-constexpr std::size_t kMinAgreeing = 4;            // of kPlaneNeighbours
-constexpr double kWallSin = 0.034899496702500969;  // sin(2 degrees), as orientation.cc's flat pairs
-constexpr std::size_t kMinOwnSide = 2;             // agreeing neighbours before a thin wall's other side counts
-constexpr std::size_t kMinOtherSide = 4;           // ... and neighbours on that side
-constexpr double kSparseSpacings = 3.0;            // 16th neighbour (~1.4 s on a surface, ~2 s on a rim)
-constexpr double kMaxLocalSpacing = 2.0;           // x the global: outliers among outliers are not a sparse region
+constexpr std::size_t kMinAgreeing = 4;   // of kPlaneNeighbours
+constexpr std::size_t kMinOwnSide = 2;    // agreeing neighbours before a thin wall's other side counts
+constexpr std::size_t kMinOtherSide = 4;  // ... and neighbours on that side
+constexpr double kSparseSpacings = 3.0;   // 16th neighbour (~1.4 s on a surface, ~2 s on a rim)
+constexpr double kMaxLocalSpacing = 2.0;  // x the global: outliers among outliers are not a sparse region
 }  // namespace
 
 StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
@@ -170,7 +169,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
         const Eigen::Vector3d chord = positions[j] - positions[i];
         if (normals[j].dot(normals[i]) > 0.0)
           ++agree;
-        else if (detail::EachBehindTheOther(chord, normals[i], normals[j], kWallSin))
+        else if (detail::EachBehindTheOther(chord, normals[i], normals[j], detail::kThinWallSin))
           ++wall;
       }
       // The other side of a wall thinner than the spacing supports P as its own side does: a
