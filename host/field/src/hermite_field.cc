@@ -809,10 +809,8 @@ double EdgeSide(const V3& p, const std::vector<V3>& positions, const std::vector
     const V3& nb = normals[nearest[m]];
     if (na.dot(nb) >= kQuadricAgreeCos) continue;  // the same face
     const V3 ab = sb - sa;
-    const double slack = kEdgeSlack * ab.norm();
-    const double b_over_a = ab.dot(na), a_over_b = -ab.dot(nb);
-    const bool convex = b_over_a < slack && a_over_b < slack;
-    const bool concave = b_over_a > -slack && a_over_b > -slack;
+    const bool convex = detail::EachBehindTheOther(ab, na, nb, -kEdgeSlack);
+    const bool concave = detail::EachBehindTheOther(ab, V3(-na), V3(-nb), -kEdgeSlack);  // each in front
     if (convex == concave) continue;
     const double da = (p - sa).dot(na), db = (p - sb).dot(nb);
     const double side = convex ? std::max(da, db) : std::min(da, db);
@@ -1281,21 +1279,23 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             }
             const double nearest = std::sqrt(near_d2[0]) / h;
             const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
-            if (to_level > std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels)) {
-              const float mag = std::min(band, static_cast<float>(std::min(to_level, nearest)));
-              x = cut ? std::max(1e-6f, mag) : -mag;
-              ++local;
-              continue;
+            // Either rule's surface must lie farther than the estimate's; `decided` is its distance
+            // (voxels, > 0 since nearest > trust), 0 while neither stands.
+            const double beyond = std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels);
+            double decided = to_level > beyond ? std::min(to_level, nearest) : 0.0;
+            if (decided == 0.0) {
+              // w's level surface too near to overrule the estimate: the planes of the node's two
+              // nearest faces may (EdgeSide), with the same test of distance. The estimate had
+              // carried one face's patches past its edge (CGAL's joint, clean, 5,000 samples: 4
+              // phantom nodes 3.5-3.8 voxels out beneath a convex edge, the nearest sample 6.4 voxels
+              // away on the other face; w 0.30, its level surface 1.25 voxels off, the estimate's 2.15).
+              const double edge = EdgeSide(p, positions, normals, std::span(near_idx.data(), got)) / h;
+              if (std::isfinite(edge) && (edge > 0.0) == cut && (!cut || w <= 0.5 - kEdgeLeanWinding) &&
+                  std::abs(edge) > beyond)
+                decided = std::abs(edge);
             }
-            // w's level surface too near to overrule the estimate: the planes of the node's two
-            // nearest faces may (EdgeSide), with the same test of distance. The estimate had
-            // carried one face's patches past its edge (CGAL's joint, clean, 5,000 samples: 4
-            // phantom nodes 3.5-3.8 voxels out beneath a convex edge, the nearest sample 6.4 voxels
-            // away on the other face; w 0.30, its level surface 1.25 voxels off, the estimate's 2.15).
-            const double edge = EdgeSide(p, positions, normals, std::span(near_idx.data(), got)) / h;
-            if (std::isfinite(edge) && (edge > 0.0) == cut && (!cut || w <= 0.5 - kEdgeLeanWinding) &&
-                std::abs(edge) > std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels)) {
-              const float mag = std::min(band, static_cast<float>(std::abs(edge)));
+            if (decided > 0.0) {
+              const float mag = std::min(band, static_cast<float>(decided));
               x = cut ? std::max(1e-6f, mag) : -mag;
               ++local;
               continue;

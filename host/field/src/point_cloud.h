@@ -101,7 +101,9 @@ inline constexpr double kClosedFlux = 0.1;
 // (unit normals n_i, n_j) by more than `min_sin` of the chord: the two sides of a wall thinner
 // than the spacing (an ear, a flange). A flipped normal's neighbour on its own smooth sheet lies
 // on its tangent plane, or in front of it where the sheet is convex, or has it in front of its
-// own where the sheet is concave (orientation.cc's flat pairs, samples.cc's stray test).
+// own where the sheet is concave (orientation.cc's flat pairs, samples.cc's stray test). A
+// negative `min_sin` lets each lie up to that fraction of the chord in front instead (a convex
+// edge's two faces, hermite_field.cc's EdgeSide; with both normals negated, a concave edge's).
 inline bool EachBehindTheOther(const Eigen::Vector3d& chord, const Eigen::Vector3d& n_i, const Eigen::Vector3d& n_j,
                                double min_sin) {
   const double length = chord.norm();
