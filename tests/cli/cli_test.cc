@@ -284,11 +284,19 @@ TEST_F(Cli, CleanJointHasNoPhantomBeneathItsConvexEdges) {
 // of this draw are kept (a leg's, line 100, dropped as stray before, and line 141, then a
 // winding outlier), and their patches and balls make 95 more phantom nodes 4-6 voxels out:
 // 137 without the disc rule, 113 with it (docs/field-methods.md § Thin walls' narrow sides).
+// Since one agreeing neighbour of its own side is enough with the wall's (FindStraySamples: a
+// sparse face's sample at a convex corner), line 426 is kept too. It lies on a sheet of the cow
+// mesh that runs inside the mesh's own solid (the mesh's winding number is 1 on both sides of
+// it), which the points present as a surface like any other: its patch cuts 10 hole nodes, at
+// most 3.6 voxels deep, into the solid in front of it (docs/field-methods.md § A sparse face's
+// sample at a convex corner).
 TEST_F(Cli, SparseCowPhantomsGoWhereTheDiscSpreadWindingNumberIsClearlyOutside) {
   const Outcome e = SampleBuildEval("cow.off", 500, 2, Path("cow"));
   ASSERT_EQ(e.code, 0) << e.out;
   EXPECT_LE(EvalFigure(e, "\"phantom_solid\":{\"nodes\":"), 120.0) << e.out;
-  EXPECT_EQ(EvalFigure(e, "\"holes\":{\"nodes\":"), 0.0) << e.out;
+  EXPECT_LE(EvalFigure(e, "\"holes\":{\"nodes\":"), 12.0) << e.out;
+  const std::string holes = e.out.substr(e.out.find("\"holes\":{"));
+  EXPECT_LT(EvalFigure({e.code, holes}, "\"deepest_voxels\":"), 4.0) << e.out;
 }
 
 // The same dense sphere without normals: thinned by position before its normals are estimated

@@ -867,6 +867,41 @@ TEST(FindStraySamples, TheNarrowSideOfAThinWallIsKeptAndFlippedNormalsAreNot) {
   }
 }
 
+// A convex corner whose one face is sampled sparsely near it (a cube with 1,000 random samples,
+// exact normals: a pair of top-face samples beside the corner): of the sample's 16 nearest, one
+// lies on its own face and the rest on the two other faces, each behind its tangent plane as it
+// is behind theirs. They support it; before, with 2 own-face neighbours required, it was dropped,
+// and the side face's patches carried the solid 7 voxels up past the top face (610 phantom nodes,
+// and the build called the closed cube an open scan). A lone outlier buried under the same
+// corner, facing into it, has none of its own side and stays stray.
+TEST(FindStraySamples, ASparseFaceSampleAtAConvexCornerIsKeptAndABuriedOutlierIsNot) {
+  Oriented corner;  // the solid x, y, z <= 0; faces sampled on a lattice of spacing 1
+  for (int a = 0; a < 10; ++a)
+    for (int b = 0; b < 10; ++b) {
+      const double u = -(a + 0.5), v = -(b + 0.5);
+      corner.positions.emplace_back(0.0, u, v);
+      corner.normals.emplace_back(1, 0, 0);
+      corner.positions.emplace_back(u, 0.0, v);
+      corner.normals.emplace_back(0, 1, 0);
+      if (u * u + v * v > 9.0) {  // the top face has no lattice sample within 3 of the corner
+        corner.positions.emplace_back(u, v, 0.0);
+        corner.normals.emplace_back(0, 0, 1);
+      }
+    }
+  corner.positions.emplace_back(-0.4, -0.6, 0.0);
+  corner.normals.emplace_back(0, 0, 1);
+  corner.positions.emplace_back(-0.9, -0.3, 0.0);
+  corner.normals.emplace_back(0, 0, 1);
+  EXPECT_TRUE(FindStraySamples(corner.positions, corner.normals).indices.empty());
+
+  const std::size_t buried = corner.positions.size();
+  corner.positions.emplace_back(-0.5, -0.5, -0.3);  // beneath the pair, facing down into the solid
+  corner.normals.emplace_back(0, 0, -1);
+  const StraySamples found = FindStraySamples(corner.positions, corner.normals);
+  ASSERT_EQ(found.indices.size(), 1u);
+  EXPECT_EQ(found.indices[0], buried);
+}
+
 }  // namespace
 }  // namespace palpa::field
 

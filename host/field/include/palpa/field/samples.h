@@ -63,10 +63,11 @@ struct StraySamples {
 ///   its 16th nearest is more than 3 s away (~1.4 s on a surface, ~2 s on an open rim: a pair
 ///   of outliers is not isolated, but its 16 neighbours are spread over a large region), or
 ///   fewer than 4 of the 16 neighbours support n: a normal with a positive dot product with n,
-///   and, when at least 2 do and at least 4 lie on the other side of a wall thinner than the
-///   spacing (P and the neighbour each behind the other's tangent plane by more than 2 degrees of
-///   the chord, normals apart), those too. A random or flipped normal has few; on a sharp edge or
-///   a thin wall its own face's samples and the wall's other side do (a flange's narrow face).
+///   and, when at least 1 does and at least 4 lie on the other side of a wall thinner than the
+///   spacing or of a convex edge (P and the neighbour each behind the other's tangent plane by
+///   more than 2 degrees of the chord, normals apart), those too. A random or flipped normal has
+///   few; on a sharp edge, a convex corner or a thin wall its own face's samples and the other
+///   faces do (a flange's narrow face; a sparse face's sample beside a cube's corner).
 /// Noise, curvature, sharp edges and thin walls raise r with d (noise of 1 voxel per axis keeps
 /// d under ~3 r); open rims lie on their plane; a sparse region has a large s. Deterministic,
 /// parallel; O(n log n). Needs at least 17 samples (fewer: none is stray).
