@@ -10,6 +10,8 @@
 
 #include "palpa/field/orientation.h"
 #include "palpa/field/point_io.h"
+#include "palpa/mesh/sample.h"
+#include "palpa/mesh/triangle_mesh.h"
 #include "test_util.h"
 
 namespace palpa::field {
@@ -105,6 +107,27 @@ TEST(CheckOrientation, TheBackFaceOfAThinWallIsNotInward) {
     const OrientationReport flipped = CheckOrientation(p, n);
     EXPECT_TRUE(flipped.Inconsistent()) << thick << ": " << flipped.Describe();
   }
+}
+
+// Issue 20: exact normals are consistent, also on thin curved walls sampled sparsely. CGAL's
+// rotor (bundled) has blades about 0.6 sample spacings thick at 500 samples; across a blade one
+// sample often lies on its partner's tangent plane while the partner lies clearly behind its own,
+// so the pair is flat, opposite, and not "each behind the other": 13 of 811 flat pairs for this
+// draw, over the 1 % bound, and the build blamed the normals. One clearly behind and the other on
+// the plane is a thin wall too; a flipped normal on one smooth sheet lies the same way off its
+// neighbour's plane as the neighbour off its own. Half the rotor's normals flipped is still caught.
+TEST(CheckOrientation, ExactNormalsOfSparselySampledThinCurvedBladesAreConsistent) {
+  const auto mesh = mesh::ReadOff(DataFile("rotor.off"));
+  ASSERT_TRUE(mesh.has_value());
+  const auto points = mesh::SampleSurface(*mesh, 500, 7);
+  ASSERT_TRUE(points.has_value());
+  const OrientationReport r = CheckOrientation(points->positions, points->normals);
+  EXPECT_EQ(r.inward_support_directions, 0) << r.Describe();
+  EXPECT_FALSE(r.Inconsistent()) << r.Describe();
+  std::vector<Eigen::Vector3d> some = points->normals;
+  std::mt19937_64 rng(5);
+  for (auto& n : some) n = (rng() % 2 == 0) ? Eigen::Vector3d(-n) : n;
+  EXPECT_TRUE(CheckOrientation(points->positions, some).Inconsistent());
 }
 
 TEST(CheckOrientation, CubePwnNormalsPointInwardOnTheLowFaces) {

@@ -840,9 +840,16 @@ bool GuardEndsPart(const V3& p, const V3& guard, double guard_d2, const std::vec
   return true;
 }
 
-// Whether the samples make a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): their normals' flux and
-// their rim samples (RimSamples) are few. `areas` as the winding number's, `rim` 0 or 1; same sizes.
-bool ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas, const std::vector<std::uint8_t>& rim) {
+// Whether the samples make a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims), from
+// their normals' flux and their rim samples (RimSamples). `areas` as the winding number's, `rim` 0 or
+// 1; same sizes.
+struct SetClosure {
+  bool closed = false;     // the far pass's rules for closed sets apply
+  bool open_side = false;  // flux or rims show an open side (HermiteStats::samples_open)
+  double area = 0.0;       // sum of the samples' areas (HermiteStats::sample_area_m2)
+};
+SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas,
+                     const std::vector<std::uint8_t>& rim) {
   V3 flux = V3::Zero();
   double area = 0.0;
   for (std::size_t i = 0; i < normals.size(); ++i) {
@@ -850,9 +857,9 @@ bool ClosedSet(const std::vector<V3>& normals, const std::vector<double>& areas,
     area += areas[i];
   }
   const auto rims = static_cast<double>(std::count(rim.begin(), rim.end(), std::uint8_t{1}));
-  if (flux.norm() < kSureClosedFlux * area) return true;
-  return flux.norm() < detail::kClosedFlux * area &&
-         rims < kClosedRims * std::sqrt(static_cast<double>(normals.size()));
+  const bool open_side = !(flux.norm() < detail::kClosedFlux * area &&
+                           rims < kClosedRims * std::sqrt(static_cast<double>(normals.size())));
+  return {.closed = !open_side || flux.norm() < kSureClosedFlux * area, .open_side = open_side, .area = area};
 }
 
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
@@ -1143,7 +1150,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The surface's own w level at each sample (1/2 on a densely sampled closed surface, lower on a
   // sparse or thin part), for the unclear nodes below; on closed sets only (an open side's
   // closure has w below the sampled surface's level all over).
-  const bool closed_set = ClosedSet(normals, areas, rim);
+  const SetClosure closure = ClosedSet(normals, areas, rim);
+  const bool closed_set = closure.closed;
+  st.samples_open = closure.open_side;
+  st.sample_area_m2 = closure.area;
   // The far pass's filter passes a node held inside whose interpolated w is under this: 1/2, and
   // on a closed set kDiscPointMax (the disc rule examines it).
   const float inside_min = closed_set ? kDiscPointMax : 0.5f;

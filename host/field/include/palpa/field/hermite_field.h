@@ -104,6 +104,14 @@ struct HermiteStats {
   // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
   // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.
   double closed_area_m2 = 0.0;
+  // Whether the samples themselves show an open side (issue 20): their normals' flux |sum a_i n_i|
+  // is at least 0.1 of their area (a closed surface's is 0), or their rim samples, across whose
+  // widest neighbour gap w falls, number 0.4 sqrt(n) or more. False for a closed set however
+  // sparse, whose field may still span gaps (closed_area_m2) or reach a grid face: that is no
+  // open scan. A clean CAD part's sharp edges may count as rims (true, with no gap to report).
+  bool samples_open = false;
+  // The samples' surface area, m^2: the sum of the winding number's area weights.
+  double sample_area_m2 = 0.0;
   // An open scan's closure beyond the grid (issue 20; HermiteOptions::closure_reach_m). Where w is
   // unclear (0.3 <= w < 1/2) the inner balls of the 16 samples nearest decide, so the closure
   // follows the scanned part's curvature and may reach past the grid fitted to the samples, where
