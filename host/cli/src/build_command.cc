@@ -323,10 +323,11 @@ int RunBuild(const BuildArgs& args) {
   }
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
-               "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; samples "
-               "beside them face the grid face, so this is a closed part thinner or sparser than the samples resolve, "
-               "not an open side\n",
-               args.points, built.hermite.face_nodes_closed);
+               "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; {}, so this "
+               "is a closed part thinner or sparser than the samples resolve, not an open side\n",
+               args.points, built.hermite.face_nodes_closed,
+               built.hermite.face_nodes_open > 0 ? "the samples show no open side (their normals' flux and rims)"
+                                                 : "samples beside them face the grid face");
   const field::GridSpec g = built.field.grid();  // a copy: the field is handed to the encoder below
   const std::size_t field_bricks = built.field.AllocatedBricks();
   const std::array<int, 3> brick_dims = built.field.brick_dims();
