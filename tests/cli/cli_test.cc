@@ -295,8 +295,9 @@ TEST_F(Cli, SparseCowPhantomsGoWhereTheDiscSpreadWindingNumberIsClearlyOutside) 
   ASSERT_EQ(e.code, 0) << e.out;
   EXPECT_LE(EvalFigure(e, "\"phantom_solid\":{\"nodes\":"), 120.0) << e.out;
   EXPECT_LE(EvalFigure(e, "\"holes\":{\"nodes\":"), 12.0) << e.out;
-  const std::string holes = e.out.substr(e.out.find("\"holes\":{"));
-  EXPECT_LT(EvalFigure({e.code, holes}, "\"deepest_voxels\":"), 4.0) << e.out;
+  const auto holes = e.out.find("\"holes\":{");
+  ASSERT_NE(holes, std::string::npos) << e.out;
+  EXPECT_LT(EvalFigure({e.code, e.out.substr(holes)}, "\"deepest_voxels\":"), 4.0) << e.out;
 }
 
 // The same dense sphere without normals: thinned by position before its normals are estimated

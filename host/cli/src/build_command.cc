@@ -260,23 +260,12 @@ int RunBuild(const BuildArgs& args) {
     built = std::move(*result);
   }
   // Issue 20: say when the scan is open (the winding number closed a surface where no sample
-  // lies) rather than leaving the user to blame the normals. Half a voxel face of area is noise.
-  const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+  // lies) rather than leaving the user to blame the normals (field::ClassifyGaps: CGAL's bull with
+  // 1,000 samples, whose sparse legs reached its bottom face, and its spool with 500, whose
+  // normals the open-scan test's tighter bound then blamed, were called open).
+  const field::ScanGaps scan = field::ClassifyGaps(built);
+  const bool open_scan = scan.open;
   const bool grown = built.grid_grown_from[0] > 0;
-  // Inside nodes cut at a grid face say the scan is open only where no sample near them faces
-  // that face (HermiteStats::face_nodes_open): CGAL's bull with 1,000 samples, whose sparse legs
-  // reached its bottom face, was called open. And only where the samples show an open side
-  // (HermiteStats::samples_open): a closed set's sparse parts span gaps too (CGAL's spool with 500
-  // samples was called open, and its normals were blamed by the open-scan test's tighter bound).
-  const bool gaps = built.hermite.closed_area_m2 > 4.0 * voxel_area || built.hermite.face_nodes_open > 0 || grown;
-  // ... or where the inside runs out through the grid faces over a cross-section comparable with
-  // the samples' own area: an open object whose samples look closed (the HIL's open plate, two
-  // sheets without a rim, flux 0: 9 % of its area) rather than a sparse part's leak (0-1.2 %
-  // over 10 sparse draws of the bull, spool, rotor, cow and couplingdown).
-  constexpr double kOpenFaceShare = 0.03;
-  const double face_share = static_cast<double>(built.hermite.face_nodes_open) * voxel_area /
-                            std::max(built.hermite.sample_area_m2, voxel_area);
-  const bool open_scan = gaps && (built.hermite.samples_open || face_share > kOpenFaceShare);
   // Every method takes the inside from the normals' sign; say so when the file's normals disagree
   // (also with -q: the field is then wrong near those points). An open scan's far side is no
   // evidence (OrientationReport::OpenScanInconsistent).
@@ -312,9 +301,9 @@ int RunBuild(const BuildArgs& args) {
                                       built.hermite.face_nodes_closed)
                         : std::string()));
   }
-  if (gaps && !open_scan && !args.quiet) {
+  if (scan.gaps && !open_scan && !args.quiet) {
     const field::Coverage coverage = field::MeasureCoverage(built.field, device.positions);
-    if (coverage.uncovered_area_m2 > 4.0 * voxel_area)
+    if (coverage.uncovered_area_m2 > scan.min_area_m2)
       fmt::print(stderr,
                  "palpa build: note: {}: the samples make a closed surface, sparsely: {:.4g} mm^2 of the field's "
                  "surface lies more than {:.3g} mm from every sample (3 sample spacings), where it is the samples' "

@@ -1,5 +1,6 @@
 #include "palpa/field/build.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <exception>
@@ -140,6 +141,17 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
 }
 
 }  // namespace
+
+ScanGaps ClassifyGaps(const BuildResult& built) {
+  const HermiteStats& st = built.hermite;
+  const double voxel_area = built.field.grid().voxel_m * built.field.grid().voxel_m;
+  ScanGaps out{.min_area_m2 = 4.0 * voxel_area};
+  out.gaps = st.closed_area_m2 > out.min_area_m2 || st.face_nodes_open > 0 || built.grid_grown_from[0] > 0;
+  const double face_share =
+      static_cast<double>(st.face_nodes_open) * voxel_area / std::max(st.sample_area_m2, voxel_area);
+  out.open = out.gaps && (st.samples_open || face_share > kOpenFaceShare);
+  return out;
+}
 
 std::expected<BuildResult, Error> BuildField(const std::vector<Eigen::Vector3d>& device_positions,
                                              const std::vector<Eigen::Vector3d>& normals, const BuildOptions& options,

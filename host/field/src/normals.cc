@@ -81,7 +81,6 @@ constexpr std::array<SheetCut, 2> kSheetCuts{{{30.0, 0.25, 8}, {15.0, 0.125, 100
 // A piece is closed for FlipSheetsByWinding when |sum_i a_i n_i| is under detail::kClosedFlux of its
 // area: 0.001-0.075 on 7 closed meshes x 3 draws with estimated normals (the elk, with wrong walls),
 // 0.14-0.19 on the femur and the camel without their -z sides (0.2 calls a piece open).
-constexpr double kSheetClosedFlux = detail::kClosedFlux;
 // The largest sheet, as a fraction 1 / kOpenSheetFraction of the samples, that the sheet pass may
 // turn on a piece open by its flux (OrientNormals).
 constexpr std::size_t kOpenSheetFraction = 4;
@@ -89,7 +88,7 @@ constexpr std::size_t kOpenSheetFraction = 4;
 // quarter of its samples changes the flux by up to half the area, so a piece above 0.1 + 0.5 is
 // open whatever one such sheet's sign (an aerial or one-sided scan: 0.x; the trial cost
 // b9_training 11 -> 28 s without this gate, for no change).
-constexpr double kOpenSheetMostFlux = kSheetClosedFlux + 2.0 / static_cast<double>(kOpenSheetFraction);
+constexpr double kOpenSheetMostFlux = detail::kClosedFlux + 2.0 / static_cast<double>(kOpenSheetFraction);
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -813,7 +812,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   // Closed pieces only: an open sheet's w is near 1/2 on both sides, so the energy's 1 inside and
   // 0 outside are no truth there (CGAL's b9_training, an aerial scan of 6 open pieces: 1,068 of
   // 9,579 normals turned, and the closure's area halved). Closed by the flux of the normals as
-  // they now stand, under kSheetClosedFlux of the area: the camel without its -z side (0.19, under
+  // they now stand, under detail::kClosedFlux of the area: the camel without its -z side (0.19, under
   // the 0.2 that calls a piece open) lost 16,200 -> 17,800 far-wrong nodes to 145 turned normals.
   if (given_are_jet_lines && report.neighbours == kCleanNormalNeighbours) {
     std::vector<V3> now(pieces, V3::Zero());
@@ -822,7 +821,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     bool any = false;
     for (std::size_t i = 0; i < n; ++i) {
       const std::uint32_t c = component[i];
-      closed[i] = now[c].norm() < kSheetClosedFlux * area[c] ? 1 : 0;
+      closed[i] = now[c].norm() < detail::kClosedFlux * area[c] ? 1 : 0;
       any = any || closed[i] != 0;
     }
     if (any) report.sheet_samples = FlipSheetsByWinding(positions, normals, closed, report.sheets);
@@ -830,7 +829,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     // for the pass above (CGAL's spool: one flange's face, 929 of 5,000 samples, reached across
     // its rim 2.5 spacings thick; flux 0.33 of the area, 0.013 once turned). The pass runs again on
     // such pieces with sheets of up to a quarter of the samples, and stands only on a piece it
-    // closes (flux under kSheetClosedFlux): an open scan's flux is its opening's, which no sign of
+    // closes (flux under detail::kClosedFlux): an open scan's flux is its opening's, which no sign of
     // its sheets removes (b9_training, hippo1, building, half.xyz: unchanged).
     std::vector<std::uint8_t> open_piece(n, 0);
     for (std::size_t i = 0; i < n; ++i)
@@ -843,7 +842,8 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
       for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
       std::vector<std::uint8_t> stands(pieces, 0);  // an open piece the trial closes
       for (std::size_t i = 0; i < n; ++i)
-        stands[component[i]] = open_piece[i] != 0 && after[component[i]].norm() < kSheetClosedFlux * area[component[i]];
+        stands[component[i]] =
+            open_piece[i] != 0 && after[component[i]].norm() < detail::kClosedFlux * area[component[i]];
       report.closed_by_sheets = static_cast<std::size_t>(std::count(stands.begin(), stands.end(), 1));
       for (std::size_t i = 0; i < n; ++i) {
         if (stands[component[i]] == 0) continue;
