@@ -269,7 +269,8 @@ int RunBuild(const BuildArgs& args) {
   // Every method takes the inside from the normals' sign; say so when the file's normals disagree
   // (also with -q: the field is then wrong near those points). An open scan's far side is no
   // evidence (OrientationReport::OpenScanInconsistent).
-  if (open_scan ? built.orientation.OpenScanInconsistent() : built.orientation.Inconsistent()) {
+  const bool normals_blamed = open_scan ? built.orientation.OpenScanInconsistent() : built.orientation.Inconsistent();
+  if (normals_blamed) {
     fmt::print(stderr,
                "palpa build: warning: {}: normals are not consistently oriented: {}. Normals must point out of the "
                "object; the field is wrong near these points.{}\n",
@@ -285,21 +286,25 @@ int RunBuild(const BuildArgs& args) {
     const field::Coverage coverage = field::MeasureCoverage(built.field, device.positions);
     const double closed_m2 = coverage.uncovered_area_m2;
     const double closed = closed_m2 / (transform.scale * transform.scale);  // model units^2
-    fmt::print(stderr,
-               "palpa build: note: {}: the scan is open (the normals are not to blame): the field closes it (by the "
-               "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
-               "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
-               "sample (3 sample spacings){}\n",
-               args.points, closed_m2 * 1e6, closed, coverage.min_distance_m * 1e3,
-               (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "
-                                    "closed side",
-                                    built.grid_grown_from[0], built.grid_grown_from[1], built.grid_grown_from[2],
-                                    built.field.grid().dims[0], built.field.grid().dims[1], built.field.grid().dims[2])
-                      : std::string()) +
-                   (built.hermite.face_nodes_closed > 0
-                        ? fmt::format(", and it was cut at the grid faces ({} face nodes set outside)",
-                                      built.hermite.face_nodes_closed)
-                        : std::string()));
+    fmt::print(
+        stderr,
+        "palpa build: note: {}: the scan {}: the field closes it (by the "
+        "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
+        "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
+        "sample (3 sample spacings){}\n",
+        args.points,
+        // A flipped patch's normals have a flux of their own, which alone makes a closed set look open.
+        normals_blamed ? "looks open (the flipped normals above may be why)" : "is open (the normals are not to blame)",
+        closed_m2 * 1e6, closed, coverage.min_distance_m * 1e3,
+        (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "
+                             "closed side",
+                             built.grid_grown_from[0], built.grid_grown_from[1], built.grid_grown_from[2],
+                             built.field.grid().dims[0], built.field.grid().dims[1], built.field.grid().dims[2])
+               : std::string()) +
+            (built.hermite.face_nodes_closed > 0
+                 ? fmt::format(", and it was cut at the grid faces ({} face nodes set outside)",
+                               built.hermite.face_nodes_closed)
+                 : std::string()));
   }
   if (scan.gaps && !open_scan && !args.quiet) {
     const field::Coverage coverage = field::MeasureCoverage(built.field, device.positions);

@@ -96,23 +96,6 @@ struct Edge {
   bool same;  // the given normals of a and b are consistent as they are (else one must flip)
 };
 
-struct UnionFind {
-  std::vector<std::uint32_t> parent;
-  explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), std::uint32_t{0}); }
-  std::uint32_t Find(std::uint32_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  }
-  bool Unite(std::uint32_t a, std::uint32_t b) {
-    a = Find(a);
-    b = Find(b);
-    if (a == b) return false;
-    if (a > b) std::swap(a, b);
-    parent[b] = a;  // the smaller index is the root: deterministic
-    return true;
-  }
-};
-
 // The K nearest other samples of each sample (fewer found: the sample itself fills the row), from
 // a k-d tree with leaves of 10 (ties at the Kth distance follow the tree: kRangeLeaf's note).
 template <std::size_t K>
@@ -497,7 +480,7 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   // smooth sheet, or the two sides of a thin wall, separate them).
   const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
   const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
-  UnionFind joined(n);
+  detail::UnionFind joined(n);
   for (std::size_t i = 0; i < n; ++i)
     for (const std::uint32_t j : graph[i]) {
       if (j == i) continue;
@@ -717,7 +700,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     if (x.a != y.a) return x.a < y.a;
     return x.b < y.b;
   });
-  UnionFind forest(n);
+  detail::UnionFind forest(n);
   struct Link {
     std::uint32_t to;
     bool same;

@@ -11,7 +11,10 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <numbers>
+#include <numeric>
+#include <utility>
 #include <vector>
 
 #include <nanoflann.hpp>
@@ -109,6 +112,26 @@ inline bool EachBehindTheOther(const Eigen::Vector3d& chord, const Eigen::Vector
   const double length = chord.norm();
   return n_i.dot(chord) < -min_sin * length && n_j.dot(chord) > min_sin * length;
 }
+
+// Disjoint sets over 0..n-1 with path halving; the smaller index is the root, so the sets and
+// their roots do not depend on the order of unions (FlipSheetsByWinding's sheets, the MST of
+// OrientNormals, the orientation check's sheets).
+struct UnionFind {
+  std::vector<std::uint32_t> parent;
+  explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), std::uint32_t{0}); }
+  std::uint32_t Find(std::uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  bool Unite(std::uint32_t a, std::uint32_t b) {
+    a = Find(a);
+    b = Find(b);
+    if (a == b) return false;
+    if (a > b) std::swap(a, b);
+    parent[b] = a;
+    return true;
+  }
+};
 
 // The median of `values` (the upper one of an even count), 0 when there are none: the one scale
 // of a sample set (spacing, noise) that a few outliers cannot move.
