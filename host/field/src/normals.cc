@@ -484,9 +484,7 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   for (std::size_t i = 0; i < n; ++i)
     for (const std::uint32_t j : graph[i]) {
       if (j == i) continue;
-      const V3 chord = (positions[j] - positions[i]).normalized();
-      if (normals[i].dot(normals[j]) > min_dot && std::abs(normals[i].dot(chord)) < cut.chord &&
-          std::abs(normals[j].dot(chord)) < cut.chord)
+      if (detail::OneSheet(positions[j] - positions[i], normals[i], normals[j], min_dot, cut.chord))
         joined.Unite(static_cast<std::uint32_t>(i), j);
     }
   std::vector<std::vector<std::uint32_t>> members(n);

@@ -142,7 +142,7 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
         const double length = chord.norm();
         if (!(length > 0.0)) continue;
         const double a = normals[i].dot(chord) / length, b = normals[j].dot(chord) / length;
-        if (normals[i].dot(normals[j]) > -kOppositeCos && std::abs(a) < kSheetSin && std::abs(b) < kSheetSin)
+        if (detail::OneSheet(chord, normals[i], normals[j], -kOppositeCos, kSheetSin))
           joined[i][joined_count[i]++] = static_cast<std::uint32_t>(j);
         if (m >= k || j < i) continue;  // the flat pairs: the kNeighbours nearest, each pair once
         if (std::abs(a) >= kFlatSin || std::abs(b) >= kFlatSin) continue;

@@ -113,6 +113,16 @@ inline bool EachBehindTheOther(const Eigen::Vector3d& chord, const Eigen::Vector
   return n_i.dot(chord) < -min_sin * length && n_j.dot(chord) > min_sin * length;
 }
 
+// Whether P_i and P_j (chord = P_j - P_i) lie on one sheet: normals within acos(min_dot) of each
+// other, signs included, and the chord within asin(max_sin) of both tangent planes, so that a
+// sign boundary and the two sides of a thin wall separate sheets (false for a zero chord).
+// FlipSheetsByWinding's cuts (normals.cc) and the orientation check's sheets (orientation.cc).
+inline bool OneSheet(const Eigen::Vector3d& chord, const Eigen::Vector3d& n_i, const Eigen::Vector3d& n_j,
+                     double min_dot, double max_sin) {
+  const Eigen::Vector3d along = chord.normalized();
+  return n_i.dot(n_j) > min_dot && std::abs(n_i.dot(along)) < max_sin && std::abs(n_j.dot(along)) < max_sin;
+}
+
 // Disjoint sets over 0..n-1 with path halving; the smaller index is the root, so the sets and
 // their roots do not depend on the order of unions (FlipSheetsByWinding's sheets, the MST of
 // OrientNormals, the orientation check's sheets).
