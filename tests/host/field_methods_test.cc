@@ -33,6 +33,7 @@ namespace palpa::field {
 namespace {
 
 using testing::DataFile;
+using testing::SampledMesh;
 
 // A v1 blob of a built field, as palpa build writes it (the payload straight from WriteQ16).
 blob::VerifiedField Encode(const BuildResult& built, const Transform& fit) {
@@ -71,14 +72,6 @@ mesh::EvalResult Score(const Case& c, const mesh::Truth& truth, const char* what
       what, std::string(MethodName(FieldMethod::kHermite)).c_str(), r.mean_abs_error, r.p99_abs_error, r.max_abs_error,
       r.mean_signed_error, r.wrong_sign_in_band_percent, r.band_nodes, r.gross_wrong_sign, r.gross_wrong_sign_percent);
   return r;
-}
-
-PointSet SampledMesh(const char* file, std::size_t count) {
-  auto m = mesh::ReadClosedMesh(DataFile(file));
-  EXPECT_TRUE(m.has_value()) << m.error().message;
-  auto points = mesh::SampleSurface(*m, count, 1, file);
-  EXPECT_TRUE(points.has_value()) << points.error().message;
-  return *points;
 }
 
 // Replaces the normals as `palpa build --normals estimate` does: jet lines, oriented, refined.

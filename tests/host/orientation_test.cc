@@ -11,8 +11,6 @@
 
 #include "palpa/field/orientation.h"
 #include "palpa/field/point_io.h"
-#include "palpa/mesh/sample.h"
-#include "palpa/mesh/triangle_mesh.h"
 #include "test_util.h"
 
 namespace palpa::field {
@@ -118,17 +116,14 @@ TEST(CheckOrientation, TheBackFaceOfAThinWallIsNotInward) {
 // the plane is a thin wall too; a flipped normal on one smooth sheet lies the same way off its
 // neighbour's plane as the neighbour off its own. Half the rotor's normals flipped is still caught.
 TEST(CheckOrientation, ExactNormalsOfSparselySampledThinCurvedBladesAreConsistent) {
-  const auto mesh = mesh::ReadOff(DataFile("rotor.off"));
-  ASSERT_TRUE(mesh.has_value());
-  const auto points = mesh::SampleSurface(*mesh, 500, 7);
-  ASSERT_TRUE(points.has_value());
-  const OrientationReport r = CheckOrientation(points->positions, points->normals);
+  const PointSet points = testing::SampledMesh("rotor.off", 500, 7);
+  const OrientationReport r = CheckOrientation(points.positions, points.normals);
   EXPECT_EQ(r.inward_support_directions, 0) << r.Describe();
   EXPECT_FALSE(r.Inconsistent()) << r.Describe();
-  std::vector<Eigen::Vector3d> some = points->normals;
+  std::vector<Eigen::Vector3d> some = points.normals;
   std::mt19937_64 rng(5);
   for (auto& n : some) n = (rng() % 2 == 0) ? Eigen::Vector3d(-n) : n;
-  EXPECT_TRUE(CheckOrientation(points->positions, some).Inconsistent());
+  EXPECT_TRUE(CheckOrientation(points.positions, some).Inconsistent());
 }
 
 // Issue 20: a patch of flipped normals (a scan's view merged with the wrong sign) on a closed
@@ -137,21 +132,18 @@ TEST(CheckOrientation, ExactNormalsOfSparselySampledThinCurvedBladesAreConsisten
 // them flipped, under the 1 % bound, and had no warning while its field grew ~2,000 far-wrong
 // nodes. The patch is a sheet of its own, bounded by flipped pairs to a far larger sheet.
 TEST(CheckOrientation, APatchOfFlippedNormalsIsFound) {
-  const auto mesh = mesh::ReadOff(DataFile("knot1.off"));
-  ASSERT_TRUE(mesh.has_value());
-  const auto points = mesh::SampleSurface(*mesh, 5000, 3);
-  ASSERT_TRUE(points.has_value());
-  const OrientationReport clean = CheckOrientation(points->positions, points->normals);
+  const PointSet points = testing::SampledMesh("knot1.off", 5000, 3);
+  const OrientationReport clean = CheckOrientation(points.positions, points.normals);
   EXPECT_FALSE(clean.Inconsistent()) << clean.Describe();
   EXPECT_EQ(clean.flipped_patch_pairs, 0u) << clean.Describe();
   for (const std::size_t centre : {0u, 1000u, 2500u}) {
     std::vector<std::pair<double, std::size_t>> by_distance;
-    for (std::size_t i = 0; i < points->positions.size(); ++i)
-      by_distance.push_back({(points->positions[i] - points->positions[centre]).squaredNorm(), i});
+    for (std::size_t i = 0; i < points.positions.size(); ++i)
+      by_distance.push_back({(points.positions[i] - points.positions[centre]).squaredNorm(), i});
     std::partial_sort(by_distance.begin(), by_distance.begin() + 40, by_distance.end());
-    std::vector<Eigen::Vector3d> normals = points->normals;
+    std::vector<Eigen::Vector3d> normals = points.normals;
     for (std::size_t m = 0; m < 40; ++m) normals[by_distance[m].second] *= -1.0;
-    const OrientationReport r = CheckOrientation(points->positions, normals);
+    const OrientationReport r = CheckOrientation(points.positions, normals);
     std::printf("[ knot1, 40 flipped around %zu ] %s\n", centre, r.Describe().c_str());
     EXPECT_LE(r.flipped_flat_pairs * 100, r.flat_pairs) << "the 1 % bound alone would catch it";
     EXPECT_GE(r.flipped_patch_samples, 30u);  // the patch, but for a sample or two of its own

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -13,9 +14,23 @@
 #include <gtest/gtest.h>
 #include <Eigen/Core>
 
+#include "palpa/field/point_io.h"
+#include "palpa/mesh/sample.h"
+#include "palpa/mesh/triangle_mesh.h"
+
 namespace palpa::field::testing {
 
 inline std::filesystem::path DataFile(std::string_view name) { return std::filesystem::path(PALPA_DATA_DIR) / name; }
+
+// `count` area-uniform samples of the bundled closed mesh `file` with its exact face normals
+// (mesh::SampleSurface, model units); a failure to read or sample fails the calling test.
+inline PointSet SampledMesh(const char* file, std::size_t count, std::uint64_t seed = 1) {
+  auto m = mesh::ReadClosedMesh(DataFile(file));
+  EXPECT_TRUE(m.has_value()) << m.error().message;
+  auto points = mesh::SampleSurface(*m, count, seed, file);
+  EXPECT_TRUE(points.has_value()) << points.error().message;
+  return *points;
+}
 
 // Point i of n on the unit sphere (Fibonacci lattice: near-uniform); it is also the outward normal.
 inline Eigen::Vector3d FibonacciPoint(std::size_t i, std::size_t n) {
