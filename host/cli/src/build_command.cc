@@ -153,7 +153,9 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode != field::NormalsMode::kKeep) {
     field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
                          normals_report, normals_mode == field::NormalsMode::kEstimate);
-    if (normals_mode == field::NormalsMode::kEstimate) field::RefineNormalLines(points->positions, points->normals);
+    if (normals_mode == field::NormalsMode::kEstimate)
+      field::RefineNormalLines(points->positions, points->normals,
+                               normals_report.neighbours == field::kCleanNormalNeighbours);
     if (!args.quiet || !points->has_normals)
       fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
                  points->has_normals      ? ""
