@@ -119,8 +119,8 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// EstimateNormalLines returned kCleanNormalNeighbours) such a sample instead takes the normal of a
 /// quadric through P_i fitted robustly to its 16 nearest (Tukey's biweight, cut at 0.06 x the 16th
 /// neighbour's distance), from whichever of their normals' frames most of them support, when it
-/// gathers 2 neighbours' weight more than the sample's own frame: a jet fit
-/// weighs a thin part's other side and the next face over a crease as much as its own surface.
+/// gathers 2 neighbours' weight more than the sample's own frame: a jet fit weighs a thin part's
+/// other side and the next face over a crease as much as its own surface.
 /// Parallel, deterministic.
 void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                        bool clean_samples);
