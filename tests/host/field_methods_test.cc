@@ -79,7 +79,7 @@ NormalsReport EstimateAsBuildDoes(PointSet& points) {
   NormalsReport report;
   report.neighbours = EstimateNormalLines(points.positions, points.normals);
   OrientNormals(points.positions, points.normals, false, report, true);
-  RefineNormalLines(points.positions, points.normals, report.neighbours == kCleanNormalNeighbours);
+  RefineNormalLines(points.positions, points.normals, report.neighbours);
   return report;
 }
 

@@ -179,10 +179,10 @@ TEST(Normals, RimSamplesOfAnOpenScanKeepTheirJetFit) {
     if (u.z() > 0.3) positions.push_back(u);
   }
   std::vector<V3> normals;
-  const bool clean = EstimateNormalLines(positions, normals) == kCleanNormalNeighbours;
+  const int neighbours = EstimateNormalLines(positions, normals);
   NormalsReport report;
   OrientNormals(positions, normals, false, report, true);
-  RefineNormalLines(positions, normals, clean);
+  RefineNormalLines(positions, normals, neighbours);
   std::vector<double> rim;
   for (std::size_t i = 0; i < positions.size(); ++i) {
     EXPECT_GT(normals[i].dot(positions[i]), 0.0) << i;
@@ -493,7 +493,7 @@ TEST(FlipSheetsByWinding, WrongPatchesOnThinPlatesAreTurnedBack) {
 TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
   const Oriented cube = Cube(20);  // spacing 0.1
   std::vector<V3> normals;
-  const bool clean = EstimateNormalLines(cube.positions, normals) == kCleanNormalNeighbours;
+  const int neighbours = EstimateNormalLines(cube.positions, normals);
   NormalsReport report;
   OrientNormals(cube.positions, normals, false, report, true);
   ASSERT_EQ(CountAgainst(normals, cube.normals), 0u);
@@ -510,7 +510,7 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
     return count;
   };
   const std::size_t jet_off = inner_off(normals);
-  RefineNormalLines(cube.positions, normals, clean);
+  RefineNormalLines(cube.positions, normals, neighbours);
   EXPECT_EQ(CountAgainst(normals, cube.normals), 0u);  // signs kept
   // The jet fit blends the faces next to each edge, over the first row and into the second
   // (408 samples beyond the first rows off by more than 0.5 degree); the refined lines are the exact face normals from
@@ -557,10 +557,10 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearEdgesOfRandomSamples) {
     const double spacing =
         std::sqrt(4.0 * static_cast<double>(shapes[shape].size()) / static_cast<double>(set.positions.size()));
     std::vector<V3> normals;
-    const bool clean = EstimateNormalLines(set.positions, normals) == kCleanNormalNeighbours;
+    const int neighbours = EstimateNormalLines(set.positions, normals);
     NormalsReport report;
     OrientNormals(set.positions, normals, false, report, true);
-    RefineNormalLines(set.positions, normals, clean);
+    RefineNormalLines(set.positions, normals, neighbours);
     std::size_t considered = 0;
     std::size_t off = 0;
     for (std::size_t i = 0; i < normals.size(); ++i) {

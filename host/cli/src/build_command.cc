@@ -154,8 +154,7 @@ int RunBuild(const BuildArgs& args) {
     field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
                          normals_report, normals_mode == field::NormalsMode::kEstimate);
     if (normals_mode == field::NormalsMode::kEstimate)
-      field::RefineNormalLines(points->positions, points->normals,
-                               normals_report.neighbours == field::kCleanNormalNeighbours);
+      field::RefineNormalLines(points->positions, points->normals, normals_report.neighbours);
     if (!args.quiet || !points->has_normals)
       fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
                  points->has_normals      ? ""

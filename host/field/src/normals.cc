@@ -91,7 +91,8 @@ struct SheetCut {
 // The coarse cut, then a fine one (half the angle and the chord, sheets of at most 1 % of the
 // samples): after the coarse pass the wrong signs left sit in a few samples that the coarse cut
 // joined to right ones (the elk's seed 6: 8 wrong and 1 right, a loss as one sheet).
-constexpr std::array<SheetCut, 2> kSheetCuts{{{30.0, 0.25, 8}, {15.0, 0.125, 100}}};
+constexpr std::array<SheetCut, 2> kSheetCuts{
+    {{30.0, detail::kCoarseSheetSin, 8}, {15.0, detail::kCoarseSheetSin / 2, 100}}};
 // A piece is closed for FlipSheetsByWinding when |sum_i a_i n_i| is under detail::kClosedFlux of its
 // area: 0.001-0.075 on 7 closed meshes x 3 draws with estimated normals (the elk, with wrong walls),
 // 0.14-0.19 on the femur and the camel without their -z sides (0.2 calls a piece open).
@@ -258,7 +259,7 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
   return neighbours;
 }
 
-void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, bool clean_samples) {
+void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, int jet_neighbours) {
   const std::size_t n = positions.size();
   if (n < 8 || normals.size() != n) return;
   const std::size_t k = std::min<std::size_t>(kRefineNeighbours, n - 1);
@@ -350,7 +351,7 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       // no facet.
       if (rough && on_plane(normal, kSelectWidth * width) < kFacetShare * static_cast<double>(got)) {
         // Here the noise figure counted curvature and creases; on a clean set they are no noise.
-        if (!clean_samples) continue;
+        if (jet_neighbours != kCleanNormalNeighbours) continue;
         const double scale = kQuadricScale * std::sqrt(d2[got - 1]);
         QuadricFit fitted;
         double own = 0;  // the support from its own jet normal's frame (idx[0] is i)
@@ -359,8 +360,8 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
           if (c == 0) own = fit.support;
           if (fit.support > fitted.support + 1e-9) fitted = fit;  // ties: the first candidate
         }
-        if (fitted.support < own + kQuadricMargin) continue;
-        if (fitted.support >= 0) normals[i] = fitted.normal.dot(start[i]) < 0 ? V3(-fitted.normal) : fitted.normal;
+        if (fitted.support >= own + kQuadricMargin)  // own >= -1, so a failed fit never passes
+          normals[i] = fitted.normal.dot(start[i]) < 0 ? V3(-fitted.normal) : fitted.normal;
         continue;
       }
       // Then a weighted PCA plane of its supporters, twice (iteratively reweighted least squares).

@@ -22,10 +22,6 @@ constexpr std::size_t kSupportPoints = 8;
 constexpr std::size_t kNeighbours = 8;
 constexpr double kFlatSin = 0.17364817766693033;  // sin(10 degrees)
 constexpr double kOppositeCos = -0.5;
-// A sheet's pairs: chord within asin(0.25) of both tangent planes (FlipSheetsByWinding's coarse
-// cut, normals.cc), wider than the flat test's 10 degrees so that a curved part sampled coarsely
-// stays one sheet.
-constexpr double kSheetSin = 0.25;
 // ... among each sample's 16 nearest: where two parts touch, half of a sample's 8 nearest lie on
 // the other part, and its own part's 4 leave the sheet in pieces.
 constexpr std::size_t kSheetNeighbours = 16;
@@ -52,9 +48,11 @@ constexpr double kSeamResultant = 0.5;
 using detail::KdTree;
 using detail::PointCloud;
 
+bool PatchFound(const OrientationReport& r) { return r.flipped_patch_pairs >= kMinPatchPairs; }
+
 bool FlippedPairsOrPatch(const OrientationReport& r) {
   return static_cast<double>(r.flipped_flat_pairs) > kFlippedFraction * static_cast<double>(r.flat_pairs) ||
-         r.flipped_patch_pairs >= kMinPatchPairs;
+         PatchFound(r);
 }
 
 }  // namespace
@@ -70,7 +68,7 @@ std::string OrientationReport::Describe() const {
       "on {} of {} directions the outermost points' normals point inward, and {} of {} neighbour pairs on one "
       "tangent plane ({} points) have opposite normals{}",
       inward_support_directions, support_directions, flipped_flat_pairs, flat_pairs, points_in_flipped_pairs,
-      flipped_patch_pairs >= kMinPatchPairs
+      PatchFound(*this)
           ? fmt::format(", {} of them around a patch of {} points whose normals all oppose their surroundings'",
                         flipped_patch_pairs, flipped_patch_samples)
           : std::string());
@@ -142,7 +140,7 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
         const double length = chord.norm();
         if (!(length > 0.0)) continue;
         const double a = normals[i].dot(chord) / length, b = normals[j].dot(chord) / length;
-        if (detail::OneSheet(chord, normals[i], normals[j], -kOppositeCos, kSheetSin))
+        if (detail::OneSheet(chord, normals[i], normals[j], -kOppositeCos, detail::kCoarseSheetSin))
           joined[i][joined_count[i]++] = static_cast<std::uint32_t>(j);
         if (m >= k || j < i) continue;  // the flat pairs: the kNeighbours nearest, each pair once
         if (std::abs(a) >= kFlatSin || std::abs(b) >= kFlatSin) continue;

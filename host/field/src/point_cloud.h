@@ -113,6 +113,11 @@ inline bool EachBehindTheOther(const Eigen::Vector3d& chord, const Eigen::Vector
   return n_i.dot(chord) < -min_sin * length && n_j.dot(chord) > min_sin * length;
 }
 
+// OneSheet's `max_sin` for a coarse sheet: FlipSheetsByWinding's first cut (normals.cc) and the
+// orientation check's sheets (orientation.cc), wider than the flat test's 10 degrees so that a
+// curved part sampled coarsely stays one sheet.
+inline constexpr double kCoarseSheetSin = 0.25;
+
 // Whether P_i and P_j (chord = P_j - P_i) lie on one sheet: normals within acos(min_dot) of each
 // other, signs included, and the chord within asin(max_sin) of both tangent planes, so that a
 // sign boundary and the two sides of a thin wall separate sheets (false for a zero chord).

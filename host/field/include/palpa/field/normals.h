@@ -115,15 +115,15 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// (its neighbours leave an angular gap over 150 degrees in its tangent plane: every plane through
 /// it extrapolates from one side and tilts, and an open side's closure magnifies the tilt; range
 /// scans without normals: far-wrong nodes 3,248 -> 0 on the sphere). Run after OrientNormals:
-/// the tree crosses edges reliably only on smooth normals. On a clean set (`clean_samples`:
-/// EstimateNormalLines returned kCleanNormalNeighbours) such a sample instead takes the normal of a
+/// the tree crosses edges reliably only on smooth normals. On a clean set (`jet_neighbours`,
+/// EstimateNormalLines' result, is kCleanNormalNeighbours) such a sample instead takes the normal of a
 /// quadric through P_i fitted robustly to its 16 nearest (Tukey's biweight, cut at 0.06 x the 16th
 /// neighbour's distance), from whichever of their normals' frames most of them support, when it
 /// gathers 2 neighbours' weight more than the sample's own frame: a jet fit weighs a thin part's
 /// other side and the next face over a crease as much as its own surface.
 /// Parallel, deterministic.
 void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
-                       bool clean_samples);
+                       int jet_neighbours);
 
 /// Turns outward the parts of a piece that an orientation left inward as a whole. A closed
 /// surface oriented outward has a winding number w (winding.h) near 1 just inside each sample and
