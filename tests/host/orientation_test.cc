@@ -153,6 +153,22 @@ TEST(CheckOrientation, APatchOfFlippedNormalsIsFound) {
   }
 }
 
+// A patch joined to the rest of its sheet elsewhere: CGAL's bull with 1,000 samples (the robustness
+// benchmark's row, data/README.md) and the 80 nearest line 311 flipped. Where the patch reaches a
+// thin part, its flipped normals agree with the far side's, and one neighbour pair there joins it
+// to the sheet of the whole surface; its rim's opposite pairs were then read as touching parts
+// (a 2 % share of the flat pairs, no warning). They lie to one side of each end, the agreeing
+// samples to the other: a seam.
+TEST(CheckOrientation, APatchJoinedAcrossAThinPartIsFound) {
+  const auto points = ReadPoints(DataFile("bull1000-flipped80.xyz"));
+  ASSERT_TRUE(points.has_value());
+  const OrientationReport r = CheckOrientation(points->positions, points->normals);
+  std::printf("[ bull, 1,000 samples, 80 flipped ] %s; touching pairs %zu\n", r.Describe().c_str(), r.touching_pairs);
+  EXPECT_GT(r.flipped_flat_pairs * 100, 2 * r.flat_pairs) << r.Describe();
+  EXPECT_TRUE(r.Inconsistent()) << r.Describe();
+  EXPECT_TRUE(r.OpenScanInconsistent()) << r.Describe();
+}
+
 // Two parts of one connected surface that touch, their normals facing across a gap far thinner
 // than the spacing (CGAL's man: legs and arms within a third of a spacing; its open scan was
 // blamed for 7 such pairs in 5,947). A U-shaped profile extruded along z: its slot is 0.1
@@ -205,7 +221,8 @@ TEST(CheckOrientation, TouchingPartsOfOneSurfaceAreNotFlipped) {
   const OrientationReport r = CheckOrientation(p, n);
   std::printf("[ U with a touching slot ] %s; touching pairs %zu\n", r.Describe().c_str(), r.touching_pairs);
   EXPECT_GT(r.touching_pairs * 100, r.flat_pairs) << "the 1 % bound would have blamed them";
-  EXPECT_EQ(r.flipped_flat_pairs, 0u) << r.Describe();
+  // A few pass the seam rule of APatchJoinedAcrossAThinPartIsFound (4 of 12,700): far under the bound.
+  EXPECT_LE(r.flipped_flat_pairs * 1000, r.flat_pairs) << r.Describe();
   EXPECT_FALSE(r.Inconsistent()) << r.Describe();
   EXPECT_FALSE(r.OpenScanInconsistent()) << r.Describe();
   // A patch of the left outer wall flipped: 0.1 < y < 0.25, 0.2 < z < 0.35.

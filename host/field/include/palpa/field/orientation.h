@@ -29,7 +29,9 @@ struct OrientationReport {
   // patch is a sheet of its own, bounded by flipped pairs; two parts of one connected surface
   // that touch (CGAL's man: legs and arms within a third of a spacing of each other, interior
   // sheets of a self-intersecting mesh) are one sheet, and their opposite pairs are
-  // `touching_pairs`, no evidence.
+  // `touching_pairs`, no evidence, unless the samples with opposite normals around each end lie
+  // to one side of it in its tangent plane (a seam: a flipped patch that joins the rest across a
+  // gap or a thin part; touching layers lie over each other).
   std::size_t flat_pairs = 0;
   std::size_t flipped_flat_pairs = 0;
   std::size_t points_in_flipped_pairs = 0;
