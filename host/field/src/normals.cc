@@ -93,9 +93,6 @@ struct SheetCut {
 // joined to right ones (the elk's seed 6: 8 wrong and 1 right, a loss as one sheet).
 constexpr std::array<SheetCut, 2> kSheetCuts{
     {{30.0, detail::kCoarseSheetSin, 8}, {15.0, detail::kCoarseSheetSin / 2, 100}}};
-// A piece is closed for FlipSheetsByWinding when |sum_i a_i n_i| is under detail::kClosedFlux of its
-// area: 0.001-0.075 on 7 closed meshes x 3 draws with estimated normals (the elk, with wrong walls),
-// 0.14-0.19 on the femur and the camel without their -z sides (0.2 calls a piece open).
 // The largest sheet, as a fraction 1 / kOpenSheetFraction of the samples, that the sheet pass may
 // turn on a piece open by its flux (OrientNormals).
 constexpr std::size_t kOpenSheetFraction = 4;
