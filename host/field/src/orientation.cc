@@ -169,31 +169,37 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
     for (std::uint8_t m = 0; m < joined_count[i]; ++m) sheets.Unite(static_cast<std::uint32_t>(i), joined[i][m]);
   std::vector<std::size_t> sheet_size(n, 0);
   for (std::size_t i = 0; i < n; ++i) ++sheet_size[sheets.Find(static_cast<std::uint32_t>(i))];
-  // The mean of the unit directions, in p's tangent plane, to the neighbours among p's 16 nearest
-  // that `belongs` picks (zero when none): 1 long when they all lie one way, near 0 when they
-  // surround p, 2 / pi for a half disc.
-  const auto mean_direction = [&](std::size_t p, const auto& belongs) {
+  // The means of the unit directions, in p's tangent plane, to the neighbours among p's 16 nearest
+  // that `group` puts in group 0 and in group 1 (kNeither: neither; a mean is zero when its
+  // group is empty): 1 long when they all lie one way, near 0 when they surround p, 2 / pi for a
+  // half disc. One search for both groups.
+  constexpr std::size_t kNeither = 2;
+  const auto mean_directions = [&](std::size_t p, const auto& group) {
     std::array<std::size_t, kSheetNeighbours + 1> idx{};
     std::array<double, kSheetNeighbours + 1> d2{};
     const std::size_t got = tree.knnSearch(positions[p].data(), k_sheet, idx.data(), d2.data());
-    V3 sum = V3::Zero();
-    std::size_t count = 0;
+    std::array<V3, 2> sum{V3::Zero(), V3::Zero()};
+    std::array<std::size_t, 2> count{0, 0};
     for (std::size_t m = 0; m < got; ++m) {
-      if (idx[m] == p || !belongs(idx[m])) continue;
+      if (idx[m] == p) continue;
+      const std::size_t g = group(idx[m]);
+      if (g == kNeither) continue;
       V3 tangent = positions[idx[m]] - positions[p];
       tangent -= tangent.dot(normals[p]) * normals[p];
-      if (tangent.norm() > 0.0) sum += tangent.normalized(), ++count;
+      if (tangent.norm() > 0.0) sum[g] += tangent.normalized(), ++count[g];
     }
-    return count > 0 ? V3(sum / static_cast<double>(count)) : V3::Zero();
+    for (std::size_t g = 0; g < 2; ++g)
+      if (count[g] > 0) sum[g] /= static_cast<double>(count[g]);
+    return sum;
   };
   // A seam, where one sheet ends and the other begins, as around a flipped patch: sheet `other`'s
   // samples lie to one side of p. Two layers facing each other across a gap thinner than the
   // spacing (CGAL's spool, a 6-view range scan with range noise: a bore's 85 samples 0.6 spacing
   // from the hub's, 11 pairs) lie over each other, and the other's samples surround p.
   const auto seam_to_sheet = [&](std::size_t p, std::uint32_t other) {
-    return mean_direction(p, [&](std::size_t q) {
-             return sheets.Find(static_cast<std::uint32_t>(q)) == other;
-           }).norm() >= kSeamResultant;
+    return mean_directions(
+               p, [&](std::size_t q) { return sheets.Find(static_cast<std::uint32_t>(q)) == other ? 0u : kNeither; })[0]
+               .norm() >= kSeamResultant;
   };
   // ... on one sheet: the samples whose normals oppose p's lie to one side and those that agree
   // with it to the other, the rim of a patch that joins the rest elsewhere, across a gap or a part
@@ -201,8 +207,10 @@ OrientationReport CheckOrientation(const std::vector<V3>& positions, const std::
   // man with 1,000 samples and 80 normals flipped: one and four such joins). Where touching
   // layers end together (a slot's open end) both lie the same way.
   const auto seam_to_opposite = [&](std::size_t p) {
-    const V3 opposed = mean_direction(p, [&](std::size_t q) { return normals[p].dot(normals[q]) < kOppositeCos; });
-    const V3 agreeing = mean_direction(p, [&](std::size_t q) { return normals[p].dot(normals[q]) > -kOppositeCos; });
+    const auto [opposed, agreeing] = mean_directions(p, [&](std::size_t q) {
+      const double c = normals[p].dot(normals[q]);
+      return c < kOppositeCos ? 0u : c > -kOppositeCos ? 1u : kNeither;
+    });
     return opposed.norm() >= kSeamResultant && agreeing.dot(opposed.normalized()) < -kSeamAgreeing;
   };
   std::vector<std::uint8_t> flipped_point(n, 0);
