@@ -1179,6 +1179,77 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     }
     return out;
   };
+  // The far pass where w is unclear (|w - 1/2| <= kWindingClear) and against the estimate at node
+  // p (value x, voxels): the node's new value where one of the two rules below overrules the
+  // estimate, none where it stands.
+  const auto unclear_side = [&](const V3& p, float x, double w) -> std::optional<float> {
+    // First, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): the estimate inside
+    // and w below the surface's own level here (LocalLevel), away from rim samples (beside its few
+    // rims, a part's unsampled end, the rims' balls close as on an open side: w low is no evidence),
+    // or the estimate outside and w above 1/2 (the level is no higher; w above 1/2 is inside beside a
+    // rim too): where w's surface at that level is farther from the node than the estimate's own and
+    // than kLevelMinVoxels (first order: |level - w| / |grad w|, central differences over a voxel),
+    // w's side stands. The estimate had carried patches and balls on past their last samples (between
+    // a sparse tube's strands, over an unsampled face), or cut short a part whose samples it did not
+    // join. Not w >= level outside: outside a thin part w reaches a low level (the bull, camel and
+    // elephant with 500 samples grew phantoms).
+    const bool cut = x <= 0.0f;  // w < 1/2 here
+    // The node's nearest samples, once for the level rule and the guards below.
+    std::array<std::size_t, kNearNeighbours> near_idx{};
+    std::array<double, kNearNeighbours> near_d2{};
+    const std::size_t near = closed_set || !guard_positions.empty()
+                                 ? wide.knnSearch(p.data(), kNearNeighbours, near_idx.data(), near_d2.data())
+                                 : 0;
+    const std::size_t got = closed_set ? std::min(near, kLevelNeighbours) : 0;
+    const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
+    const bool cut_beside_rim =
+        cut && std::any_of(near_idx.begin(), near_idx.begin() + static_cast<std::ptrdiff_t>(got),
+                           [&](std::size_t k) { return rim[k] != 0; });
+    if (got > 0 && (w < level) == cut && !cut_beside_rim) {
+      V3 grad;
+      for (Eigen::Index axis = 0; axis < 3; ++axis) {
+        const V3 step = h * V3::Unit(axis);
+        grad[axis] = 0.5 * (winding(V3(p + step)) - winding(V3(p - step)));
+      }
+      const double nearest = std::sqrt(near_d2[0]) / h;
+      const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
+      // Either rule's surface must lie farther than the estimate's; `decided` is its distance
+      // (voxels, > 0 since nearest > trust), 0 while neither stands.
+      const double beyond = std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels);
+      double decided = to_level > beyond ? std::min(to_level, nearest) : 0.0;
+      if (decided == 0.0) {
+        // w's level surface too near to overrule the estimate: the planes of the node's two
+        // nearest faces may (EdgeSide), with the same test of distance. The estimate had
+        // carried one face's patches past its edge (CGAL's joint, clean, 5,000 samples: 4
+        // phantom nodes 3.5-3.8 voxels out beneath a convex edge, the nearest sample 6.4 voxels
+        // away on the other face; w 0.30, its level surface 1.25 voxels off, the estimate's 2.15).
+        const double edge = EdgeSide(p, positions, normals, std::span(near_idx.data(), got)) / h;
+        if (std::isfinite(edge) && (edge > 0.0) == cut && (!cut || w <= 0.5 - kEdgeLeanWinding) &&
+            std::abs(edge) > beyond)
+          decided = std::abs(edge);
+      }
+      if (decided > 0.0) {
+        const float mag = std::min(band, static_cast<float>(decided));
+        return cut ? std::max(1e-6f, mag) : -mag;
+      }
+    }
+    // w unclear, the estimate inside: a guard (a dropped sample) that the node lies in
+    // front of, beyond trust, decides outside when it is among the node's neighbours
+    // (GuardEndsPart). Such a guard is, on a sparse set, the only sample of a part's end (a
+    // hoof's sole), whose neighbours' patches carry the part on past it. With the estimate
+    // outside the side stands and the guard's plane gives the distance (the bull with 500
+    // samples, seed 4: band mean 0.6326 voxel with the estimate's, 0.6322 with the guard's).
+    if (guard_positions.empty()) return std::nullopt;
+    std::size_t g = 0;
+    double g2 = 0.0;
+    guards.knnSearch(p.data(), 1, &g, &g2);
+    const double front = (p - guard_positions[g]).dot(guard_normals[g]);
+    const std::size_t guard_near = std::min(near, kGuardNeighbours);
+    if (front <= trust || !GuardEndsPart(p, guard_positions[g], g2, positions, normals,
+                                         std::span(near_idx.data(), guard_near), std::span(near_d2.data(), guard_near)))
+      return std::nullopt;
+    return std::min(band, static_cast<float>(front / h));
+  };
   std::atomic<std::size_t> far_flipped{0}, far_faces{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, evaluated.size(), 4), [&](const auto& r) {
     std::size_t local = 0, face_local = 0;
@@ -1259,76 +1330,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
-          // w unclear and against the estimate, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims).
-          // The estimate inside and w below the surface's own level here (LocalLevel), away from rim samples (beside
-          // its few rims, a part's unsampled end, the rims' balls close as on an open side: w low is no evidence), or
-          // the estimate outside and w above 1/2 (the level is no higher; w above 1/2 is inside beside a rim too):
-          // where w's surface at that level is farther from the node than the estimate's own and
-          // than kLevelMinVoxels (first order: |level - w| / |grad w|, central differences over a
-          // voxel), w's side stands. The estimate had carried patches and balls on past their
-          // last samples (between a sparse tube's strands, over an unsampled face), or cut short
-          // a part whose samples it did not join. Not w >= level outside: outside a thin part w
-          // reaches a low level (the bull, camel and elephant with 500 samples grew phantoms).
-          const bool cut = x <= 0.0f;  // w < 1/2 here
-          // The node's nearest samples, once for the level rule and the guards below.
-          std::array<std::size_t, kNearNeighbours> near_idx{};
-          std::array<double, kNearNeighbours> near_d2{};
-          const std::size_t near = closed_set || !guard_positions.empty()
-                                       ? wide.knnSearch(p.data(), kNearNeighbours, near_idx.data(), near_d2.data())
-                                       : 0;
-          const std::size_t got = closed_set ? std::min(near, kLevelNeighbours) : 0;
-          const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
-          const bool cut_beside_rim =
-              cut && std::any_of(near_idx.begin(), near_idx.begin() + static_cast<std::ptrdiff_t>(got),
-                                 [&](std::size_t k) { return rim[k] != 0; });
-          if (got > 0 && (w < level) == cut && !cut_beside_rim) {
-            V3 grad;
-            for (Eigen::Index axis = 0; axis < 3; ++axis) {
-              const V3 step = h * V3::Unit(axis);
-              grad[axis] = 0.5 * (winding(V3(p + step)) - winding(V3(p - step)));
-            }
-            const double nearest = std::sqrt(near_d2[0]) / h;
-            const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
-            // Either rule's surface must lie farther than the estimate's; `decided` is its distance
-            // (voxels, > 0 since nearest > trust), 0 while neither stands.
-            const double beyond = std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels);
-            double decided = to_level > beyond ? std::min(to_level, nearest) : 0.0;
-            if (decided == 0.0) {
-              // w's level surface too near to overrule the estimate: the planes of the node's two
-              // nearest faces may (EdgeSide), with the same test of distance. The estimate had
-              // carried one face's patches past its edge (CGAL's joint, clean, 5,000 samples: 4
-              // phantom nodes 3.5-3.8 voxels out beneath a convex edge, the nearest sample 6.4 voxels
-              // away on the other face; w 0.30, its level surface 1.25 voxels off, the estimate's 2.15).
-              const double edge = EdgeSide(p, positions, normals, std::span(near_idx.data(), got)) / h;
-              if (std::isfinite(edge) && (edge > 0.0) == cut && (!cut || w <= 0.5 - kEdgeLeanWinding) &&
-                  std::abs(edge) > beyond)
-                decided = std::abs(edge);
-            }
-            if (decided > 0.0) {
-              const float mag = std::min(band, static_cast<float>(decided));
-              x = cut ? std::max(1e-6f, mag) : -mag;
-              ++local;
-              continue;
-            }
+          if (const std::optional<float> decided = unclear_side(p, x, w)) {
+            x = *decided;
+            ++local;
           }
-          // w unclear, the estimate inside: a guard (a dropped sample) that the node lies in
-          // front of, beyond trust, decides outside when it is among the node's neighbours
-          // (GuardEndsPart). Such a guard is, on a sparse set, the only sample of a part's end (a
-          // hoof's sole), whose neighbours' patches carry the part on past it. With the estimate
-          // outside the side stands and the guard's plane gives the distance (the bull with 500
-          // samples, seed 4: band mean 0.6326 voxel with the estimate's, 0.6322 with the guard's).
-          if (guard_positions.empty()) continue;
-          std::size_t g = 0;
-          double g2 = 0.0;
-          guards.knnSearch(p.data(), 1, &g, &g2);
-          const double front = (p - guard_positions[g]).dot(guard_normals[g]);
-          const std::size_t guard_near = std::min(near, kGuardNeighbours);
-          if (front <= trust ||
-              !GuardEndsPart(p, guard_positions[g], g2, positions, normals, std::span(near_idx.data(), guard_near),
-                             std::span(near_d2.data(), guard_near)))
-            continue;
-          x = std::min(band, static_cast<float>(front / h));
-          ++local;
           continue;
         }
         if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
