@@ -153,6 +153,30 @@ TEST(CheckOrientation, APatchOfFlippedNormalsIsFound) {
   }
 }
 
+// A small patch on a sparse set: knot1 with 1,000 samples and the 20 nearest one sample flipped.
+// Its rim has 6 flipped pairs at a seam, under the 1 % bound (6 of ~1,050 flat pairs), and
+// the patch test needed 8 (consistent sets reach 3 at most: kMinPatchPairs' note).
+TEST(CheckOrientation, ASmallPatchOnASparseSetIsFound) {
+  const PointSet points = testing::SampledMesh("knot1.off", 1000, 1);
+  const OrientationReport clean = CheckOrientation(points.positions, points.normals);
+  EXPECT_FALSE(clean.Inconsistent()) << clean.Describe();
+  for (const std::size_t centre : {325u, 725u}) {
+    std::vector<std::pair<double, std::size_t>> by_distance;
+    for (std::size_t i = 0; i < points.positions.size(); ++i)
+      by_distance.push_back({(points.positions[i] - points.positions[centre]).squaredNorm(), i});
+    std::partial_sort(by_distance.begin(), by_distance.begin() + 20, by_distance.end());
+    std::vector<Eigen::Vector3d> normals = points.normals;
+    for (std::size_t m = 0; m < 20; ++m) normals[by_distance[m].second] *= -1.0;
+    const OrientationReport r = CheckOrientation(points.positions, normals);
+    std::printf("[ knot1, 1,000 samples, 20 flipped around %zu ] %s\n", centre, r.Describe().c_str());
+    EXPECT_LE(r.flipped_flat_pairs * 100, r.flat_pairs) << "the 1 % bound alone would catch it";
+    EXPECT_EQ(r.inward_support_directions, 0u);
+    EXPECT_GE(r.flipped_patch_samples, 15u);
+    EXPECT_LE(r.flipped_patch_samples, 20u);
+    EXPECT_TRUE(r.Inconsistent()) << r.Describe();
+  }
+}
+
 // A patch joined to the rest of its sheet elsewhere: CGAL's bull with 1,000 samples (the robustness
 // benchmark's row, data/README.md) and the 80 nearest line 311 flipped. Where the patch reaches a
 // thin part, its flipped normals agree with the far side's, and one neighbour pair there joins it
