@@ -126,6 +126,17 @@ TEST(CheckOrientation, ExactNormalsOfSparselySampledThinCurvedBladesAreConsisten
   EXPECT_TRUE(CheckOrientation(points.positions, some).Inconsistent());
 }
 
+// `points`' normals with the `count` samples nearest sample `centre` (itself included) flipped.
+std::vector<Eigen::Vector3d> NearestFlipped(const PointSet& points, std::size_t centre, std::size_t count) {
+  std::vector<std::pair<double, std::size_t>> by_distance;
+  for (std::size_t i = 0; i < points.positions.size(); ++i)
+    by_distance.push_back({(points.positions[i] - points.positions[centre]).squaredNorm(), i});
+  std::partial_sort(by_distance.begin(), by_distance.begin() + static_cast<std::ptrdiff_t>(count), by_distance.end());
+  std::vector<Eigen::Vector3d> normals = points.normals;
+  for (std::size_t m = 0; m < count; ++m) normals[by_distance[m].second] *= -1.0;
+  return normals;
+}
+
 // Issue 20: a patch of flipped normals (a scan's view merged with the wrong sign) on a closed
 // surface. Its boundary is a closed curve of flipped pairs, a small share of all flat pairs:
 // knot1 with 40 of its 5,000 exact normals flipped (a patch 3 spacings across) has 0.2 % of
@@ -137,12 +148,7 @@ TEST(CheckOrientation, APatchOfFlippedNormalsIsFound) {
   EXPECT_FALSE(clean.Inconsistent()) << clean.Describe();
   EXPECT_EQ(clean.flipped_patch_pairs, 0u) << clean.Describe();
   for (const std::size_t centre : {0u, 1000u, 2500u}) {
-    std::vector<std::pair<double, std::size_t>> by_distance;
-    for (std::size_t i = 0; i < points.positions.size(); ++i)
-      by_distance.push_back({(points.positions[i] - points.positions[centre]).squaredNorm(), i});
-    std::partial_sort(by_distance.begin(), by_distance.begin() + 40, by_distance.end());
-    std::vector<Eigen::Vector3d> normals = points.normals;
-    for (std::size_t m = 0; m < 40; ++m) normals[by_distance[m].second] *= -1.0;
+    const std::vector<Eigen::Vector3d> normals = NearestFlipped(points, centre, 40);
     const OrientationReport r = CheckOrientation(points.positions, normals);
     std::printf("[ knot1, 40 flipped around %zu ] %s\n", centre, r.Describe().c_str());
     EXPECT_LE(r.flipped_flat_pairs * 100, r.flat_pairs) << "the 1 % bound alone would catch it";
@@ -161,12 +167,7 @@ TEST(CheckOrientation, ASmallPatchOnASparseSetIsFound) {
   const OrientationReport clean = CheckOrientation(points.positions, points.normals);
   EXPECT_FALSE(clean.Inconsistent()) << clean.Describe();
   for (const std::size_t centre : {325u, 725u}) {
-    std::vector<std::pair<double, std::size_t>> by_distance;
-    for (std::size_t i = 0; i < points.positions.size(); ++i)
-      by_distance.push_back({(points.positions[i] - points.positions[centre]).squaredNorm(), i});
-    std::partial_sort(by_distance.begin(), by_distance.begin() + 20, by_distance.end());
-    std::vector<Eigen::Vector3d> normals = points.normals;
-    for (std::size_t m = 0; m < 20; ++m) normals[by_distance[m].second] *= -1.0;
+    const std::vector<Eigen::Vector3d> normals = NearestFlipped(points, centre, 20);
     const OrientationReport r = CheckOrientation(points.positions, normals);
     std::printf("[ knot1, 1,000 samples, 20 flipped around %zu ] %s\n", centre, r.Describe().c_str());
     EXPECT_LE(r.flipped_flat_pairs * 100, r.flat_pairs) << "the 1 % bound alone would catch it";
