@@ -45,7 +45,7 @@ struct OrientationReport {
 
   // True when a test finds inconsistency: any inward support direction, flipped pairs above 1 %
   // of the flat pairs (a few can come from noise on thin, noisy sheets), or a flipped patch
-  // bounded by at least 8 of them.
+  // bounded by at least 5 of them at a seam (8 until 2026-11-26).
   bool Inconsistent() const;
   // For an open scan (issue 20): the support test assumes a closed surface, and on a scan seen
   // from one side the farthest points away from the scanner face it, inward by that test. True
