@@ -129,6 +129,21 @@ TEST(Normals, CleanSamplesOfAThinPlateKeepEachSidesLine) {
   EXPECT_LE(off, considered / 20) << off << " of " << considered;
 }
 
+TEST(Normals, ACleanWallThinnerThanTheSpacingIsNotTakenForNoise) {
+  // Sides 0.6 spacings apart (CGAL's rotor's blades): a sample's 10 nearest hold both, and one
+  // quadric through them leaves a residual of noise at 0.5 voxel; two parallel sheets leave ~0.
+  // The same plate with that noise (0.2 of the 8th neighbour's distance) is still noisy.
+  const double h = 1.0 / 40;
+  const Oriented plate = Plate(h, 0.6 * h, 5);
+  std::vector<V3> lines;
+  EXPECT_EQ(EstimateNormalLines(plate.positions, lines), kCleanNormalNeighbours);
+  std::mt19937 random(9);
+  std::normal_distribution<double> noise(0.0, 0.2 * std::sqrt(8.0 / std::numbers::pi) * h / std::sqrt(2.0));
+  Oriented noisy = plate;
+  for (V3& p : noisy.positions) p += V3(noise(random), noise(random), noise(random));
+  EXPECT_EQ(EstimateNormalLines(noisy.positions, lines), kNormalNeighbours);
+}
+
 TEST(Normals, NoisySamplesAreFittedOverEighteenNeighbours) {
   // Position noise of 0.2 of the 8th neighbour's distance (what 0.5 voxel is at 150 cells on
   // 5,000 samples): the wider fit averages it. The clean sphere is fitted over 10.

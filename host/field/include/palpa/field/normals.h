@@ -71,6 +71,8 @@ inline constexpr int kOrientNeighbours = 12;
 /// is below this: 0.004-0.033 on exact samples of 13 meshes, 0.007 and 0.045 on the real kitten
 /// and oni scans, 0.046-0.096 at 0.25 voxel of position noise (5,000 samples, 150 cells),
 /// 0.090-0.18 at 0.5 voxel, 0.17-0.29 at 1 voxel.
+/// A sample whose nearest fit two parallel sheets far better than one quadric (a wall thinner
+/// than the spacing) counts that fit's residual (normals.cc, kTwoSheetShare).
 inline constexpr double kCleanNoise = 0.075;
 /// A noisy set whose 18-neighbour lines of nearest neighbours differ by more than kRoughNormalsDeg
 /// on the median is fitted again over 1.5x as many (up to kMostNormalNeighbours) until they
