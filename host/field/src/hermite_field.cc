@@ -228,9 +228,7 @@ Patch FitPatch(const KdTree& tree, const std::vector<V3>& positions, const std::
                double voxel) {
   const V3& p = positions[i];
   const V3& n = normals[i];
-  const V3 axis = std::abs(n.x()) < 0.9 ? V3(V3::UnitX()) : V3(V3::UnitY());
-  const V3 t1 = axis.cross(n).normalized();
-  const V3 t2 = n.cross(t1);
+  const auto [t1, t2] = detail::TangentFrame(n);
   std::array<std::size_t, kQuadricNeighbours + 1> idx{};
   std::array<double, kQuadricNeighbours + 1> d2{};
   std::vector<std::pair<double, std::size_t>> order;

@@ -155,9 +155,7 @@ QuadricFit RobustQuadricThrough(const std::vector<V3>& positions, const std::siz
                                 const V3& p, const V3& axis, double scale) {
   using M5 = Eigen::Matrix<double, 5, 5>;
   using V5 = Eigen::Matrix<double, 5, 1>;
-  const V3 helper = std::abs(axis.x()) < 0.9 ? V3::UnitX() : V3::UnitY();
-  const V3 t1 = helper.cross(axis).normalized();
-  const V3 t2 = axis.cross(t1);
+  const auto [t1, t2] = detail::TangentFrame(axis);
   std::array<V5, kRefineNeighbours + 1> rows{};
   std::array<double, kRefineNeighbours + 1> heights{};
   std::array<double, kRefineNeighbours + 1> weights{};

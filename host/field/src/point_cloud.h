@@ -158,6 +158,14 @@ inline double Median(std::vector<double> values) {
   return *mid;
 }
 
+// An orthonormal frame (t1, t2) of the plane normal to unit `normal`, with (t1, t2, normal)
+// right-handed: the one frame of every height fit here (a fit's coefficients depend on it).
+inline std::pair<Eigen::Vector3d, Eigen::Vector3d> TangentFrame(const Eigen::Vector3d& normal) {
+  const Eigen::Vector3d axis = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = axis.cross(normal).normalized();
+  return {t1, normal.cross(t1)};
+}
+
 // The RMS residual of a least-squares quadric height over the tangent plane of `normal` at `p`,
 // h(u, v) = c0 + c1 u + c2 v + c3 u^2 + c4 uv + c5 v^2, through the samples idx[0..count) that
 // `use(j)` accepts (u, v and h in units of `scale`: a well-conditioned fit), over (used - 6)
@@ -169,9 +177,7 @@ double QuadricResidual(const std::vector<Eigen::Vector3d>& positions, const std:
                        const Eigen::Vector3d& p, const Eigen::Vector3d& normal, double scale, int min_used, Use use) {
   using M6 = Eigen::Matrix<double, 6, 6>;
   using V6 = Eigen::Matrix<double, 6, 1>;
-  const Eigen::Vector3d axis = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d t1 = axis.cross(normal).normalized();
-  const Eigen::Vector3d t2 = normal.cross(t1);
+  const auto [t1, t2] = TangentFrame(normal);
   M6 m = M6::Zero();
   V6 rhs = V6::Zero();
   int used = 0;
@@ -224,9 +230,7 @@ inline double TwoSheetResidual(const std::vector<Eigen::Vector3d>& positions, co
     covariance += d * d.transpose();
   }
   const Eigen::Vector3d normal = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance).eigenvectors().col(0);
-  const Eigen::Vector3d axis = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d t1 = axis.cross(normal).normalized();
-  const Eigen::Vector3d t2 = normal.cross(t1);
+  const auto [t1, t2] = TangentFrame(normal);
   std::array<V7, 64> rows;
   std::array<double, 64> h;
   std::array<std::size_t, 64> order;
