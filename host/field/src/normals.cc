@@ -370,21 +370,9 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       }
       // Then a weighted PCA plane of its supporters, twice (iteratively reweighted least squares).
       for (int iteration = 0; iteration < 2; ++iteration) {
-        V3 centre = V3::Zero();
-        double total = 0;
-        for (std::size_t m = 0; m < got; ++m) {
-          weight[m] = support(normal, m);
-          centre += weight[m] * positions[idx[m]];
-          total += weight[m];
-        }
-        centre /= total;
-        Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-        for (std::size_t m = 0; m < got; ++m) {
-          const V3 d = positions[idx[m]] - centre;
-          covariance += weight[m] * d * d.transpose();
-        }
-        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
-        const V3 line = solver.eigenvectors().col(0);
+        for (std::size_t m = 0; m < got; ++m) weight[m] = support(normal, m);
+        const V3 line =
+            detail::FitLeastVariancePlane(positions, idx.data(), got, [&](std::size_t m) { return weight[m]; }).normal;
         normal = line.dot(normal) < 0 ? V3(-line) : line;
       }
       normals[i] = normal;

@@ -158,6 +158,36 @@ inline double Median(std::vector<double> values) {
   return *mid;
 }
 
+// The plane of least variance of the samples idx[0..count) weighted by weight(m) (total > 0):
+// through their weighted centre, its normal the scatter matrix's eigenvector of least eigenvalue
+// (sign arbitrary), `variance` that eigenvalue (the weighted sum of squared offsets from the plane,
+// model units squared). The stray test's plane (samples.cc), the edge refinement's weighted PCA and
+// TwoSheetResidual's frame (normals.cc, below).
+struct LeastVariancePlane {
+  Eigen::Vector3d centre;
+  Eigen::Vector3d normal;
+  double variance;
+};
+template <class Weight>
+LeastVariancePlane FitLeastVariancePlane(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx,
+                                         std::size_t count, Weight weight) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  double total = 0;
+  for (std::size_t m = 0; m < count; ++m) {
+    const double w = weight(m);
+    centre += w * positions[idx[m]];
+    total += w;
+  }
+  centre /= total;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (std::size_t m = 0; m < count; ++m) {
+    const Eigen::Vector3d d = positions[idx[m]] - centre;
+    scatter += weight(m) * d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
+  return {centre, solver.eigenvectors().col(0), solver.eigenvalues()[0]};
+}
+
 // An orthonormal frame (t1, t2) of the plane normal to unit `normal`, with (t1, t2, normal)
 // right-handed: the one frame of every height fit here (a fit's coefficients depend on it).
 inline std::pair<Eigen::Vector3d, Eigen::Vector3d> TangentFrame(const Eigen::Vector3d& normal) {
@@ -221,15 +251,7 @@ inline double TwoSheetResidual(const std::vector<Eigen::Vector3d>& positions, co
   using M7 = Eigen::Matrix<double, 7, 7>;
   using V7 = Eigen::Matrix<double, 7, 1>;
   if (count < 2 * kSheetMin + 1 || count > 64) return -1.0;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (std::size_t a = 0; a < count; ++a) mean += positions[idx[a]];
-  mean /= static_cast<double>(count);
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  for (std::size_t a = 0; a < count; ++a) {
-    const Eigen::Vector3d d = positions[idx[a]] - mean;
-    covariance += d * d.transpose();
-  }
-  const Eigen::Vector3d normal = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance).eigenvectors().col(0);
+  const Eigen::Vector3d normal = FitLeastVariancePlane(positions, idx, count, [](std::size_t) { return 1.0; }).normal;
   const auto [t1, t2] = TangentFrame(normal);
   std::array<V7, 64> rows;
   std::array<double, 64> h;

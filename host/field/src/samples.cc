@@ -145,18 +145,10 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
   std::vector<double> excess(n, -1.0);  // offset in spacings when stray, else -1
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      Eigen::Vector3d c = Eigen::Vector3d::Zero();
-      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) c += positions[nb[i * kPlaneNeighbours + m]];
-      c /= static_cast<double>(kPlaneNeighbours);
-      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      for (std::size_t m = 0; m < kPlaneNeighbours; ++m) {
-        const Eigen::Vector3d d = positions[nb[i * kPlaneNeighbours + m]] - c;
-        cov += d * d.transpose();
-      }
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-      const Eigen::Vector3d v = eig.eigenvectors().col(0);  // smallest eigenvalue first
-      const double rms = std::sqrt(std::max(eig.eigenvalues()[0], 0.0) / static_cast<double>(kPlaneNeighbours));
-      const double offset = std::abs(v.dot(positions[i] - c));
+      const detail::LeastVariancePlane plane = detail::FitLeastVariancePlane(
+          positions, &nb[i * kPlaneNeighbours], kPlaneNeighbours, [](std::size_t) { return 1.0; });
+      const double rms = std::sqrt(std::max(plane.variance, 0.0) / static_cast<double>(kPlaneNeighbours));
+      const double offset = std::abs(plane.normal.dot(positions[i] - plane.centre));
       // The spacing where P is: the median of its neighbours' own (a sparse region of a real scan
       // is not an outlier; a sample far from a normally dense surface is).
       std::array<double, kPlaneNeighbours> around{};
