@@ -23,8 +23,60 @@ namespace {
 
 using V3 = Eigen::Vector3d;
 
+// QuadricResidual's fit over all of idx[0..count) as two parallel sheets: one quadric height over
+// the plane of least variance of the samples (both sheets' normal: a jet normal fitted through two
+// sheets can tilt by 70 degrees) plus a constant offset for the samples above a cut in height, at
+// the cut (at least kSheetMin on each side) that leaves the least RMS residual, over (count - 7)
+// degrees of freedom, in model units; < 0 when count is under 2 kSheetMin + 1 or over 64. A wall
+// thinner than the spacing puts its other side among a sample's nearest: one quadric counts that
+// side as noise (CGAL's rotor, blades 0.6 spacings thick, exact samples: 0.149 of the 8th
+// neighbour's distance, over kCleanNoise), two sheets leave ~0. Noise, split anywhere, keeps most
+// of its residual.
+double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
+                        double scale) {
+  constexpr std::size_t kSheetMin = 3;
+  using M7 = Eigen::Matrix<double, 7, 7>;
+  using V7 = Eigen::Matrix<double, 7, 1>;
+  if (count < 2 * kSheetMin + 1 || count > 64) return -1.0;
+  const V3 normal = detail::FitLeastVariancePlane(positions, idx, count, [](std::size_t) { return 1.0; }).normal;
+  const auto [t1, t2] = detail::TangentFrame(normal);
+  std::array<V7, 64> rows;
+  std::array<double, 64> h;
+  std::array<std::size_t, 64> order;
+  for (std::size_t a = 0; a < count; ++a) {
+    const V3 d = (positions[idx[a]] - p) / scale;
+    const double u = d.dot(t1), v = d.dot(t2);
+    rows[a] << 1, u, v, u * u, u * v, v * v, 0;
+    h[a] = d.dot(normal);
+    order[a] = a;
+  }
+  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(count),
+            [&](std::size_t x, std::size_t y) { return h[x] < h[y]; });
+  double best = -1.0;
+  for (std::size_t cut = kSheetMin; cut + kSheetMin <= count; ++cut) {
+    for (std::size_t r = 0; r < count; ++r) rows[order[r]][6] = r >= cut ? 1.0 : 0.0;
+    M7 m = M7::Zero();
+    V7 rhs = V7::Zero();
+    for (std::size_t a = 0; a < count; ++a) {
+      m += rows[a] * rows[a].transpose();
+      rhs += rows[a] * h[a];
+    }
+    m.diagonal().array() += 1e-9;
+    const V7 c = m.ldlt().solve(rhs);
+    if (!c.allFinite()) continue;
+    double sum2 = 0.0;
+    for (std::size_t a = 0; a < count; ++a) {
+      const double e = h[a] - rows[a].dot(c);
+      sum2 += e * e;
+    }
+    const double residual = std::sqrt(sum2 / static_cast<double>(count - 7)) * scale;
+    if (best < 0.0 || residual < best) best = residual;
+  }
+  return best;
+}
+
 // EstimateNormalLines' noise figure takes a sample's fit as two parallel sheets (a wall thinner
-// than the spacing: detail::TwoSheetResidual) where that leaves under this share of one quadric's
+// than the spacing: TwoSheetResidual) where that leaves under this share of one quadric's
 // residual. Noise, split anywhere, keeps most of its residual; a clean thin wall keeps ~0 (CGAL's
 // rotor, blades 0.6 spacings thick, was read as noisy). At 0.2 CGAL's building.ply, an aerial scan
 // whose roofs step in parallel levels, was also called clean; at 0.1 it is not.
@@ -217,7 +269,7 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
       const double scale = std::sqrt(d2[got - 1]);
       double residual = detail::QuadricResidual(positions, idx.data(), got, positions[i], normals[i], scale, 8,
                                                 [](std::size_t) { return true; });
-      const double sheets = detail::TwoSheetResidual(positions, idx.data(), got, positions[i], scale);
+      const double sheets = TwoSheetResidual(positions, idx.data(), got, positions[i], scale);
       if (sheets >= 0.0 && sheets < kTwoSheetShare * residual) residual = sheets;
       relative[s] = eighth > 0 ? std::max(residual, 0.0) / eighth : 0.0;
     }
