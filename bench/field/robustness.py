@@ -246,11 +246,13 @@ def verdict(label, r, clean, q):
     def vs_poisson(factor=1.0, far=True):
         if p is None:
             return
-        tag = "Poisson" if factor == 1.0 else f"{factor}x Poisson"
-        at_most("band mean", r["mean"], factor * p["mean"], f"{tag} {factor * p['mean']:.3f}")
-        at_most("wrong %", r["wrong"], factor * p["wrong"], f"{tag} {factor * p['wrong']:.2f}")
+        def limit(value, digits):
+            return (f"Poisson's {value:.{digits}f}" if factor == 1.0 else
+                    f"{factor}x Poisson's {value:.{digits}f} = {factor * value:.{digits}f}")
+        at_most("band mean", r["mean"], factor * p["mean"], limit(p["mean"], 3))
+        at_most("wrong %", r["wrong"], factor * p["wrong"], limit(p["wrong"], 2))
         if far:
-            at_most("far", r["far"], p["far"], f"Poisson {p['far']:,}")
+            at_most("far", r["far"], p["far"], f"Poisson's {p['far']:,}")
 
     if label == "clean":
         vs_poisson(0.9, far=False)
@@ -262,7 +264,7 @@ def verdict(label, r, clean, q):
         at_most("far", r["far"], 100, "100")
     elif label.startswith("one stray point"):
         if clean is not None and abs(r["mean"] - clean["mean"]) > 0.01 * clean["mean"] + 1e-9:
-            miss.append(f"band mean {r['mean']:.3f} != clean {clean['mean']:.3f}")
+            miss.append(f"band mean {r['mean']:.3f} != the clean row's {clean['mean']:.3f}")
         at_most("far", r["far"], 0, "0")
         if not r.get("warnings"):
             miss.append("no warning names the stray point")
@@ -270,7 +272,8 @@ def verdict(label, r, clean, q):
         vs_poisson()
     elif label.startswith("normals stripped"):
         if clean is not None:
-            at_most("wrong %", r["wrong"], 1.5 * clean["wrong"], f"1.5x clean {1.5 * clean['wrong']:.2f}")
+            at_most("wrong %", r["wrong"], 1.5 * clean["wrong"],
+                    f"1.5x the clean row's {clean['wrong']:.2f} = {1.5 * clean['wrong']:.2f}")
         at_most("far", r["far"], 100, "100")
     at_most("inside on faces", r["faces"], 0, "0")
     return miss

@@ -29,14 +29,14 @@ class Verdict(unittest.TestCase):
         # 0.19 > 0.9 x 0.2, one far-wrong node > 0: two misses, each named.
         miss = verdict("clean", figures(mean=0.19, wrong=1.8, far=1), None, poisson)
         self.assertEqual(len(miss), 2)
-        self.assertTrue(miss[0].startswith("band mean 0.190 > 0.9x Poisson 0.180"), miss)
+        self.assertEqual(miss[0], "band mean 0.190 > 0.9x Poisson's 0.200 = 0.180")
         self.assertTrue(miss[1].startswith("far 1 > 0"), miss)
 
     def test_sparse_rows_are_judged_against_poissons_far_count(self):
         poisson = figures(mean=0.5, wrong=5.0, far=142)
         self.assertEqual(verdict("500 samples", figures(mean=0.4, wrong=4.0, far=142), None, poisson), [])
         self.assertEqual(verdict("1000 samples", figures(mean=0.4, wrong=4.0, far=143), None, poisson),
-                         ["far 143 > Poisson 142"])
+                         ["far 143 > Poisson's 142"])
 
     def test_noise_and_outliers_allow_a_hundred_far_nodes(self):
         poisson = figures(mean=0.3, wrong=3.0, far=0)
@@ -48,13 +48,13 @@ class Verdict(unittest.TestCase):
         clean = figures(mean=0.100)
         self.assertEqual(verdict("one stray point 8 voxels out", figures(mean=0.1005, warnings=["w"]), clean, None), [])
         miss = verdict("one stray point 8 voxels out", figures(mean=0.102), clean, None)
-        self.assertEqual(miss, ["band mean 0.102 != clean 0.100", "no warning names the stray point"])
+        self.assertEqual(miss, ["band mean 0.102 != the clean row's 0.100", "no warning names the stray point"])
 
     def test_stripped_normals_against_the_same_points_exact_normals(self):
         clean = figures(wrong=0.92)
         self.assertEqual(verdict("normals stripped (estimated)", figures(wrong=1.38, far=100), clean, None), [])
         self.assertEqual(verdict("normals stripped (estimated)", figures(wrong=2.28, far=106), clean, None),
-                         ["wrong % 2.280 > 1.5x clean 1.38", "far 106 > 100"])
+                         ["wrong % 2.280 > 1.5x the clean row's 0.92 = 1.38", "far 106 > 100"])
 
     def test_open_scans_keep_the_grid_faces_outside(self):
         poisson = figures(mean=1.0, wrong=10.0, far=1000)
