@@ -52,14 +52,24 @@ double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx
   }
   std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(count),
             [&](std::size_t x, std::size_t y) { return h[x] < h[y]; });
+  // The quadric's block of the normal equations is the same at every cut; only the offset's row
+  // and column (sums over the samples above the cut, in index order as before) change.
+  M7 quadric = M7::Zero();
+  V7 quadric_rhs = V7::Zero();
+  for (std::size_t a = 0; a < count; ++a) {
+    quadric += rows[a] * rows[a].transpose();
+    quadric_rhs += rows[a] * h[a];
+  }
   double best = -1.0;
   for (std::size_t cut = kSheetMin; cut + kSheetMin <= count; ++cut) {
     for (std::size_t r = 0; r < count; ++r) rows[order[r]][6] = r >= cut ? 1.0 : 0.0;
-    M7 m = M7::Zero();
-    V7 rhs = V7::Zero();
+    M7 m = quadric;
+    V7 rhs = quadric_rhs;
     for (std::size_t a = 0; a < count; ++a) {
-      m += rows[a] * rows[a].transpose();
-      rhs += rows[a] * h[a];
+      if (rows[a][6] == 0.0) continue;
+      m.row(6) += rows[a].transpose();
+      m.col(6).head<6>() += rows[a].head<6>();
+      rhs[6] += h[a];
     }
     m.diagonal().array() += 1e-9;
     const V7 c = m.ldlt().solve(rhs);
