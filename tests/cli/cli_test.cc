@@ -14,6 +14,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "palpa/blob/blob.h"
@@ -411,8 +412,12 @@ TEST_F(Cli, StraySamplesAreIgnoredAndNamed) {
 // open scans; the open-scan test's tighter bound on flipped pairs then blamed their exact normals.
 // Only samples that show an open side themselves (normals' flux >= 0.1 of their area, or many rim
 // samples: HermiteStats::samples_open) make an open scan; the open scans' tests below still hold.
+// The spool's and the rotor's fields have surface far from every sample, and the note says so;
+// couplingdown's no longer has (since the closing balls must continue the surface, 86 mm^2 -> none
+// over the note's threshold; far-wrong nodes 7,452 -> 6,826), so only the first two hold for it.
 TEST_F(Cli, SparseClosedSetsAreNotCalledOpenScans) {
-  for (const auto& [mesh, seed] : {std::pair{"spool.off", 3}, {"couplingdown.off", 4}, {"rotor.off", 7}}) {
+  for (const auto& [mesh, seed, sparse_note] :
+       {std::tuple{"spool.off", 3, true}, {"couplingdown.off", 4, false}, {"rotor.off", 7, true}}) {
     const std::string points = Path(std::string(mesh) + ".xyz");
     ASSERT_EQ(Palpa("sample " + std::string(PALPA_DATA_DIR) + "/" + mesh + " -n 500 --seed " + std::to_string(seed) +
                     " -o " + points + " -q")
@@ -422,7 +427,9 @@ TEST_F(Cli, SparseClosedSetsAreNotCalledOpenScans) {
     ASSERT_EQ(b.code, 0) << b.out;
     EXPECT_EQ(b.out.find("the scan is open"), std::string::npos) << mesh << b.out;
     EXPECT_EQ(b.out.find("not consistently oriented"), std::string::npos) << mesh << b.out;
-    EXPECT_NE(b.out.find("the samples make a closed surface, sparsely"), std::string::npos) << mesh << b.out;
+    if (sparse_note) {
+      EXPECT_NE(b.out.find("the samples make a closed surface, sparsely"), std::string::npos) << mesh << b.out;
+    }
   }
 }
 

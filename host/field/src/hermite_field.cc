@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -101,6 +102,23 @@ constexpr double kEdgeSlack = 0.25;
 constexpr double kEdgeLeanWinding = 0.02;
 // Inner balls tried per query (those of the samples nearest it).
 constexpr std::size_t kClosingBalls = 16;
+// A ball closes a point only where it continues the scanned surface (ClosingRule::Continues): on
+// the far side of its sample from the point, the surface lies on the ball kContinueDegrees[k]
+// of arc away, in each of kContinueSectors directions round the normal. A probe point on the
+// ball is on the surface when a sample lies within kContinueTolSpacings of the sample's spacing
+// plus kContinueTolRadius of the radius, with its normal within acos(kContinueCos) of the
+// ball's radius. A sphere's balls pass at 30 and 60 degrees; a flat wall's, a hole's or a cut
+// cylinder's (a wrist or a hub, cut flat) do not: the ball there is not the surface's curvature
+// but the size of the unscanned space (joint's open scan: 476,426 -> 100,859 far-wrong nodes).
+constexpr std::array<double, 2> kContinueDegrees = {30.0, 60.0};
+constexpr int kContinueSectors = 8;
+constexpr double kContinueTolSpacings = 0.5;
+constexpr double kContinueTolRadius = 0.02;
+constexpr double kContinueCos = 0.8;
+// A point within this share of its distance from the sample of the sample's normal line (nearly
+// straight behind it) has no tangential direction: the ball must continue in 6 of the 8 sectors.
+constexpr double kBehindShare = 0.3;
+constexpr int kBehindSectors = 5;
 // A guard speaks for a node with an unclear w when it is nearer than this many of its nearest
 // samples (GuardEndsPart). The nearest alone left the bull's 49 far-wrong nodes (1,000 samples,
 // seed 1; 27 under its hooves); 8 leaves 25.
@@ -870,15 +888,45 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
 // or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
-// samples nearest it. Unclear is w >= kBallClosingWinding, or w >= kRimClosingWinding where the
-// nearest sample lies on a rim (RimSamples): past an open side's rim w falls towards 0.2 on the
-// missing part (a sphere scanned above -0.17 R: 0.18 at its lowest point), and only there do the
-// rim's balls continue the surface. Used by LabelByWinding and ClosureBeyondGrid alike.
+// samples nearest it that continues the surface towards it (Continues). Unclear is
+// w >= kBallClosingWinding, or w >= kRimClosingWinding where the nearest sample lies on a rim
+// (RimSamples): past an open side's rim w falls towards 0.2 on the missing part (a sphere scanned
+// above -0.17 R: 0.18 at its lowest point), and only there do the rim's balls continue the
+// surface. Used by LabelByWinding and ClosureBeyondGrid alike.
 class ClosingRule {
  public:
+  // `spacing`: SampleSpacing of `positions`. Probes every ball once (kContinueSectors x
+  // kContinueDegrees nearest-sample queries per sample).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
-              const std::vector<V3>& positions, const std::vector<V3>& normals)
-      : tree_(tree), inner_(inner), rim_(rim), positions_(positions), normals_(normals) {}
+              const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing)
+      : tree_(tree), inner_(inner), rim_(rim), positions_(positions), normals_(normals), sectors_(inner.radii.size()) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const V3& n = normals[i];
+        const auto [e1, e2] = TangentBasis(n);
+        const double r = inner.radii[i];
+        const double tol = kContinueTolSpacings * spacing[i] + kContinueTolRadius * r;
+        std::uint8_t mask = 0;
+        for (int k = 0; k < kContinueSectors; ++k) {
+          const double around = 2.0 * std::numbers::pi * k / kContinueSectors;
+          const V3 t = std::cos(around) * e1 + std::sin(around) * e2;
+          bool on_ball = true;
+          for (const double degrees : kContinueDegrees) {
+            const double arc = degrees * std::numbers::pi / 180.0;
+            const V3 u = std::cos(arc) * n + std::sin(arc) * t;  // the probe's radius direction
+            const V3 probe = inner.centres[i] + r * u;
+            std::size_t j = 0;
+            double d2 = 0.0;
+            if (tree.knnSearch(probe.data(), 1, &j, &d2) == 0 || std::sqrt(d2) > tol ||
+                normals[j].dot(u) < kContinueCos)
+              on_ball = false;
+          }
+          if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
+        }
+        sectors_[i] = mask;
+      }
+    });
+  }
   struct Balls {
     double phi = std::numeric_limits<double>::infinity();  // metres; +infinity: the test does not apply
     double threshold = kBallClosingWinding;                // the w below which the balls do not close
@@ -895,18 +943,41 @@ class ClosingRule {
     const double threshold = beyond_rim ? kRimClosingWinding : kBallClosingWinding;
     if (w < threshold) return {};
     double best = std::numeric_limits<double>::infinity();
-    for (std::size_t m = 0; m < got; ++m)
-      best = std::min(best, (p - inner_.centres[idx[m]]).norm() - inner_.radii[idx[m]]);
+    for (std::size_t m = 0; m < got; ++m) {
+      const std::size_t i = idx[m];
+      const double phi = (p - inner_.centres[i]).norm() - inner_.radii[i];
+      if (phi < best && (phi >= 0.0 || Continues(i, p))) best = phi;
+    }
     return {best, threshold};
   }
   bool Inside(double w, const V3& p) const { return w >= 0.5 || BallPhi(w, p).phi < 0.0; }
 
  private:
+  static std::pair<V3, V3> TangentBasis(const V3& n) {
+    const V3 e1 = n.unitOrthogonal();
+    return {e1, n.cross(e1)};
+  }
+  // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
+  // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
+  // sample, in kBehindSectors sectors.
+  bool Continues(std::size_t i, const V3& p) const {
+    const std::uint8_t mask = sectors_[i];
+    const V3& n = normals_[i];
+    const V3 d = p - positions_[i];
+    const V3 t = d - d.dot(n) * n;
+    if (t.norm() < kBehindShare * d.norm()) return std::popcount(mask) >= kBehindSectors;
+    const auto [e1, e2] = TangentBasis(n);
+    const double sector = std::atan2(-t.dot(e2), -t.dot(e1)) / (2.0 * std::numbers::pi / kContinueSectors);
+    const int k = static_cast<int>(((std::lround(sector) % kContinueSectors) + kContinueSectors) % kContinueSectors);
+    return ((mask >> k) & 1u) != 0;
+  }
+
   const KdTree& tree_;
   const Packing& inner_;
   const std::vector<std::uint8_t>& rim_;
   const std::vector<V3>& positions_;
   const std::vector<V3>& normals_;
+  std::vector<std::uint8_t> sectors_;  // bit k: the ball lies on the surface in sector k (Continues)
 };
 
 // HermiteStats::closure_beyond_grid: the lattice of half a brick past `grid`, within `reach_m` of
@@ -982,7 +1053,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
                                          static_cast<std::size_t>(bd[2]) + 1};
   const auto node_at = [&](double i, double j, double k) { return V3(grid.origin_m + h * V3(i, j, k)); };
   const std::vector<std::uint8_t> rim = RimSamples(tree, positions, normals, winding);
-  const ClosingRule rule(tree, st.inner, rim, positions, normals);
+  const ClosingRule rule(tree, st.inner, rim, positions, normals, spacing);
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
   std::vector<std::uint8_t> corner_in(corner_w.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
