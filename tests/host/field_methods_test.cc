@@ -815,20 +815,13 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
       n.push_back(pts->normals[i]);
     }
   const auto wrong_and_faces = [&](const BuildResult& built) {
-    const SparseField& f = built.field;
-    const GridSpec& g = f.grid();
+    const GridSpec& g = built.field.grid();
     std::size_t face_inside = 0, wrong = 0;
-    for (int i = 0; i < g.dims[0]; ++i)
-      for (int j = 0; j < g.dims[1]; ++j)
-        for (int k = 0; k < g.dims[2]; ++k) {
-          const bool inside = f.Value(i, j, k) <= 0;
-          const bool face =
-              i == 0 || j == 0 || k == 0 || i == g.dims[0] - 1 || j == g.dims[1] - 1 || k == g.dims[2] - 1;
-          if (face && inside) ++face_inside;
-          const Eigen::Vector3d x = g.Node(i, j, k);
-          if (std::abs(x.norm() - r) / g.voxel_m <= g.band_voxels) continue;
-          wrong += inside != (x.norm() < r) ? 1u : 0u;
-        }
+    ForEachNode(built.field, [&](const Eigen::Vector3d& x, bool inside, bool face) {
+      if (face && inside) ++face_inside;
+      if (std::abs(x.norm() - r) / g.voxel_m <= g.band_voxels) return;
+      wrong += inside != (x.norm() < r) ? 1u : 0u;
+    });
     return std::pair{wrong, face_inside};
   };
   BuildOptions options;

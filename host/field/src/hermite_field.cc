@@ -116,7 +116,8 @@ constexpr double kContinueTolSpacings = 0.5;
 constexpr double kContinueTolRadius = 0.02;
 constexpr double kContinueCos = 0.8;
 // A point within this share of its distance from the sample of the sample's normal line (nearly
-// straight behind it) has no tangential direction: the ball must continue in 6 of the 8 sectors.
+// straight behind it) has no tangential direction: the ball must continue in kBehindSectors of the
+// kContinueSectors sectors (a sphere's rim sample has 5: 3 point into the missing part).
 constexpr double kBehindShare = 0.3;
 constexpr int kBehindSectors = 5;
 // A guard speaks for a node with an unclear w when it is nearer than this many of its nearest
@@ -788,8 +789,7 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
     std::array<double, kRimNeighbours + 1> d2{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const V3& n = normals[i];
-      const V3 u = n.unitOrthogonal();
-      const V3 v = n.cross(u);
+      const auto [u, v] = detail::AngleFrame(n);
       const std::size_t got = tree.knnSearch(positions[i].data(), kRimNeighbours + 1, idx.data(), d2.data());
       const detail::TangentGap widest = detail::WidestTangentGap<kRimNeighbours + 1>(positions, idx.data(), got, i, n);
       if (widest.count < 3 || widest.gap <= detail::kRimGap) continue;
@@ -903,24 +903,22 @@ class ClosingRule {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const V3& n = normals[i];
-        const auto [e1, e2] = TangentBasis(n);
+        const auto [e1, e2] = detail::AngleFrame(n);
         const double r = inner.radii[i];
         const double tol = kContinueTolSpacings * spacing[i] + kContinueTolRadius * r;
         std::uint8_t mask = 0;
         for (int k = 0; k < kContinueSectors; ++k) {
           const double around = 2.0 * std::numbers::pi * k / kContinueSectors;
           const V3 t = std::cos(around) * e1 + std::sin(around) * e2;
-          bool on_ball = true;
-          for (const double degrees : kContinueDegrees) {
+          const bool on_ball = std::all_of(kContinueDegrees.begin(), kContinueDegrees.end(), [&](double degrees) {
             const double arc = degrees * std::numbers::pi / 180.0;
             const V3 u = std::cos(arc) * n + std::sin(arc) * t;  // the probe's radius direction
             const V3 probe = inner.centres[i] + r * u;
             std::size_t j = 0;
             double d2 = 0.0;
-            if (tree.knnSearch(probe.data(), 1, &j, &d2) == 0 || std::sqrt(d2) > tol ||
-                normals[j].dot(u) < kContinueCos)
-              on_ball = false;
-          }
+            return tree.knnSearch(probe.data(), 1, &j, &d2) > 0 && std::sqrt(d2) <= tol &&
+                   normals[j].dot(u) >= kContinueCos;
+          });
           if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
         }
         sectors_[i] = mask;
@@ -953,10 +951,6 @@ class ClosingRule {
   bool Inside(double w, const V3& p) const { return w >= 0.5 || BallPhi(w, p).phi < 0.0; }
 
  private:
-  static std::pair<V3, V3> TangentBasis(const V3& n) {
-    const V3 e1 = n.unitOrthogonal();
-    return {e1, n.cross(e1)};
-  }
   // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
   // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
   // sample, in kBehindSectors sectors.
@@ -966,7 +960,7 @@ class ClosingRule {
     const V3 d = p - positions_[i];
     const V3 t = d - d.dot(n) * n;
     if (t.norm() < kBehindShare * d.norm()) return std::popcount(mask) >= kBehindSectors;
-    const auto [e1, e2] = TangentBasis(n);
+    const auto [e1, e2] = detail::AngleFrame(n);
     const double sector = std::atan2(-t.dot(e2), -t.dot(e1)) / (2.0 * std::numbers::pi / kContinueSectors);
     const int k = static_cast<int>(((std::lround(sector) % kContinueSectors) + kContinueSectors) % kContinueSectors);
     return ((mask >> k) & 1u) != 0;

@@ -49,11 +49,19 @@ inline constexpr std::size_t kRangeLeaf = 24;
 // neighbours (RimSamples in hermite_field.cc, RefineNormalLines in normals.cc).
 inline constexpr double kRimGap = 150.0 * std::numbers::pi / 180.0;
 
+// The frame (u, v) = (normal.unitOrthogonal(), normal x u) of the plane normal to unit `normal`
+// in which angles round a sample are measured: WidestTangentGap's, RimSamples' direction across
+// the gap and the closing rule's sectors (hermite_field.cc). Height fits use TangentFrame (below);
+// the two are kept apart because each one's angles are stored and read back in its own frame.
+inline std::pair<Eigen::Vector3d, Eigen::Vector3d> AngleFrame(const Eigen::Vector3d& normal) {
+  const Eigen::Vector3d u = normal.unitOrthogonal();
+  return {u, normal.cross(u)};
+}
+
 // The widest angle between consecutive neighbours of P_i (idx[0, count), i itself and any
 // neighbour on the line through P_i along `normal` skipped) projected on the plane through P_i
-// normal to `normal`, the direction (angle) across its middle in the frame u =
-// normal.unitOrthogonal(), v = normal x u, and how many neighbours were projected. At most
-// `Capacity` neighbours are used.
+// normal to `normal`, the direction (angle) across its middle in AngleFrame(normal), and how many
+// neighbours were projected. At most `Capacity` neighbours are used.
 struct TangentGap {
   double gap = 0.0;
   double mid = 0.0;
@@ -62,8 +70,7 @@ struct TangentGap {
 template <std::size_t Capacity>
 TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx, std::size_t count,
                             std::size_t i, const Eigen::Vector3d& normal) {
-  const Eigen::Vector3d u = normal.unitOrthogonal();
-  const Eigen::Vector3d v = normal.cross(u);
+  const auto [u, v] = AngleFrame(normal);
   std::array<double, Capacity> angle{};
   std::size_t m = 0;
   for (std::size_t q = 0; q < count && m < Capacity; ++q) {
