@@ -34,7 +34,9 @@
 // w is below the level it takes at the 8 nearest samples (SampleProbes::Levels) and none of them
 // is a rim sample, and inside where w is above 1/2, when w's surface at that level lies
 // farther than the estimate's own and than a voxel: sparse sets' phantoms and holes,
-// docs/field-methods.md § Sparse closed sets), and no node on a grid face stays inside. Where
+// docs/field-methods.md § Sparse closed sets; and inside where w is at least 0.55 and the node,
+// in front of its nearest sample, lies behind one of its 8 nearest that faces that one with an
+// opposed normal: parts that touch, § Parts that touch), and no node on a grid face stays inside. Where
 // w is unclear (0.3 <= w < 1/2, or down to 0.1 behind a rim sample: an open scan's missing side)
 // the inner balls of the nearest samples decide, so the closure continues the scanned curvature
 // (closure_beyond_grid). Last SparseField::ProjectLipschitz makes every axis neighbour difference
