@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -90,6 +91,14 @@ int RunBuild(const BuildArgs& args) {
 
   // Before any work: a build can take minutes, and its target must not be a device or the input.
   if (const int refused = CheckOutput("build", args.output, {args.points}); refused != kExitOk) return refused;
+  if (!args.points_out.empty()) {
+    if (args.points_out == args.output) {
+      fmt::print(stderr, "palpa build: --points-out {}: the same path as -o\n", args.points_out);
+      return kExitBadInput;
+    }
+    if (const int refused = CheckOutput("build", args.points_out, {args.points, args.output}); refused != kExitOk)
+      return refused;
+  }
   // Degenerate samples are dropped here, after reading, and named (issue 20): a real scan with a
   // few zero normals must not be refused whole. --strict refuses them.
   auto points =
@@ -348,6 +357,23 @@ int RunBuild(const BuildArgs& args) {
                                                      {.version = args.format,
                                                       .band_inside = static_cast<std::uint32_t>(args.band_voxels),
                                                       .band_outside = static_cast<std::uint32_t>(args.band_outside)});
+  // --points-out before the blob: a failure leaves neither new (the blob's own failure can
+  // still leave the points written, complete).
+  if (!args.points_out.empty()) {
+    std::string text;
+    text.reserve(device.positions.size() * 96);
+    for (std::size_t i = 0; i < device.positions.size(); ++i) {
+      const Eigen::Vector3d model = (device.positions[i] - transform.offset_m) / transform.scale;
+      const Eigen::Vector3d& n = device.normals[i];
+      text += fmt::format("{:.9g} {:.9g} {:.9g} {:.9g} {:.9g} {:.9g}\n", model.x(), model.y(), model.z(), n.x(), n.y(),
+                          n.z());
+    }
+    if (auto w = io::WriteFileAtomically(args.points_out, std::as_bytes(std::span(text)), {.inputs = {args.points}});
+        !w) {
+      fmt::print(stderr, "palpa build: {}\n", w.error());
+      return kExitIo;
+    }
+  }
   if (auto w = io::WriteFileAtomically(args.output, bytes, {.inputs = {args.points}}); !w) {
     fmt::print(stderr, "palpa build: {}\n", w.error());
     return kExitIo;

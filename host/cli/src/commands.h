@@ -39,6 +39,8 @@ struct BuildArgs {
   bool strict = false;           ///< refuse degenerate samples instead of dropping them (issue 20)
   std::string normals = "keep";  ///< keep | orient | estimate (field::NormalsMode, issue 20)
   std::string denoise = "auto";  ///< auto | off (field::SmoothNoisyPositions, issue 20)
+  /// Non-empty: also write the samples the field was built from (model units, x y z nx ny nz).
+  std::string points_out;
 };
 int RunBuild(const BuildArgs& args);
 

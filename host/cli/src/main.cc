@@ -74,6 +74,10 @@ int main(int argc, char** argv) {
                                palpa::field::kMovePasses))
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "off"}));
+  build->add_option("--points-out", b.points_out,
+                    "Also write the oriented points the field was built from, in model units, as x y z nx ny nz "
+                    "lines: the normals --normals estimated or oriented, without the samples dropped or ignored, "
+                    "after --denoise moved them (written only when the build succeeds)");
   build->add_flag("--strict", b.strict,
                   "Refuse a point file with any zero-length or non-finite normal or exact duplicate (default: "
                   "drop them and say so)");
