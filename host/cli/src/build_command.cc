@@ -22,6 +22,7 @@
 #include "palpa/field/samples.h"
 #include "palpa/field/to_blob.h"
 #include "palpa/io/atomic_file.h"
+#include "palpa/mesh/sample.h"
 
 namespace palpa::cli {
 namespace {
@@ -360,14 +361,7 @@ int RunBuild(const BuildArgs& args) {
   // --points-out before the blob: a failure leaves neither new (the blob's own failure can
   // still leave the points written, complete).
   if (!args.points_out.empty()) {
-    std::string text;
-    text.reserve(device.positions.size() * 96);
-    for (std::size_t i = 0; i < device.positions.size(); ++i) {
-      const Eigen::Vector3d model = (device.positions[i] - transform.offset_m) / transform.scale;
-      const Eigen::Vector3d& n = device.normals[i];
-      text += fmt::format("{:.9g} {:.9g} {:.9g} {:.9g} {:.9g} {:.9g}\n", model.x(), model.y(), model.z(), n.x(), n.y(),
-                          n.z());
-    }
+    const std::string text = mesh::ToXyzText(field::ApplyTransform(transform.Inverse(), device));
     if (auto w = io::WriteFileAtomically(args.points_out, std::as_bytes(std::span(text)), {.inputs = {args.points}});
         !w) {
       fmt::print(stderr, "palpa build: {}\n", w.error());

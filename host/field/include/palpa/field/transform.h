@@ -16,6 +16,8 @@ struct Transform {
   Eigen::Vector3d offset_m = Eigen::Vector3d::Zero();
 
   Eigen::Vector3d Apply(const Eigen::Vector3d& model) const { return scale * model + offset_m; }
+  /// device -> model: scale 1 / scale, offset -offset_m / scale.
+  Transform Inverse() const { return {1.0 / scale, -offset_m / scale}; }
 };
 
 // Scales so that the longest side of the axis-aligned bounding box of `points.positions` becomes
