@@ -31,9 +31,10 @@ using V3 = Eigen::Vector3d;
 // thinner than the spacing puts its other side among a sample's nearest: one quadric counts that
 // side as noise (CGAL's rotor, blades 0.6 spacings thick, exact samples: 0.149 of the 8th
 // neighbour's distance, over kCleanNoise), two sheets leave ~0. Noise, split anywhere, keeps most
-// of its residual.
+// of its residual. `other_sheet`, when given, receives the best cut's rows (bit a for idx[a]) that
+// lie on the other sheet than p.
 double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
-                        double scale) {
+                        double scale, std::uint64_t* other_sheet = nullptr) {
   constexpr std::size_t kSheetMin = 3;
   using M7 = Eigen::Matrix<double, 7, 7>;
   using V7 = Eigen::Matrix<double, 7, 1>;
@@ -80,7 +81,18 @@ double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx
       sum2 += e * e;
     }
     const double residual = std::sqrt(sum2 / static_cast<double>(count - 7)) * scale;
-    if (best < 0.0 || residual < best) best = residual;
+    if (best < 0.0 || residual < best) {
+      best = residual;
+      if (other_sheet != nullptr) {
+        // p's own row is the one at p (height 0 after the fit's offset is taken off: any row at p).
+        double own = 0.0;
+        for (std::size_t a = 0; a < count; ++a)
+          if ((positions[idx[a]] - p).squaredNorm() == 0.0) own = rows[a][6];
+        *other_sheet = 0;
+        for (std::size_t a = 0; a < count; ++a)
+          if (rows[a][6] != own) *other_sheet |= std::uint64_t{1} << a;
+      }
+    }
   }
   return best;
 }
@@ -169,6 +181,52 @@ constexpr std::size_t kOpenSheetFraction = 4;
 // open whatever one such sheet's sign (an aerial or one-sided scan: 0.x; the trial cost
 // b9_training 11 -> 28 s without this gate, for no change).
 constexpr double kOpenSheetMostFlux = detail::kClosedFlux + 2.0 / static_cast<double>(kOpenSheetFraction);
+
+// A sheet pass keeps apart two samples that a two-sheet fit of either's kCleanNormalNeighbours
+// nearest (TwoSheetResidual) puts on the wall's two sides, where that fit leaves under this share
+// of one quadric's residual. The two sides of a wall thinner than the spacing are each other's
+// nearest samples; once one side has taken the other's sign, their chords pass SheetCut's test
+// (CGAL's rotor, normals stripped: the largest sheet held 100 wrong samples). Tried 0.1-1 on the
+// rotor, spool, couplingdown, pinion: 0.3-0.5 best; 0.1 leaves most walls joined, 0.7 joins
+// across creases.
+constexpr double kThinWallShare = 0.5;
+using OtherSides = std::vector<std::array<std::uint32_t, kCleanNormalNeighbours>>;
+
+// For each sample, the neighbours on a thin wall's other side (kThinWallShare), UINT32_MAX after
+// the last. `lines`: the normals' lines (their signs do not matter).
+OtherSides ThinWallOtherSides(const std::vector<V3>& positions, const std::vector<V3>& lines) {
+  const std::size_t n = positions.size();
+  OtherSides other(n);
+  for (auto& o : other) o.fill(UINT32_MAX);
+  constexpr auto k = static_cast<std::size_t>(kCleanNormalNeighbours);
+  if (n <= k) return other;
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
+    std::array<std::size_t, k + 1> idx{};
+    std::array<double, k + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
+      const double scale = std::sqrt(d2[got - 1]);
+      const double one = detail::QuadricResidual(positions, idx.data(), got, positions[i], lines[i], scale, 8,
+                                                 [](std::size_t) { return true; });
+      std::uint64_t across = 0;
+      const double two = TwoSheetResidual(positions, idx.data(), got, positions[i], scale, &across);
+      if (!(two >= 0.0 && two < kThinWallShare * one)) continue;
+      std::size_t m = 0;
+      for (std::size_t a = 0; a < got && m < k; ++a)
+        if (((across >> a) & 1u) != 0 && idx[a] != i) other[i][m++] = static_cast<std::uint32_t>(idx[a]);
+    }
+  });
+  return other;
+}
+
+bool OnOtherSides(const OtherSides& other, std::uint32_t i, std::uint32_t j) {
+  const auto lists = [](const std::array<std::uint32_t, kCleanNormalNeighbours>& o, std::uint32_t x) {
+    return std::find(o.begin(), o.end(), x) != o.end();
+  };
+  return lists(other[i], j) || lists(other[j], i);
+}
 
 struct Edge {
   float cost;  // the MST follows the smoothest, flattest paths (OrientNormals)
@@ -574,10 +632,13 @@ double SmoothedDipole(const V3& p, double a, const V3& n, const V3& q) {
 
 // One pass of FlipSheetsByWinding with the sheets of `cut`.
 std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normals,
-                       const std::vector<std::uint8_t>& eligible, const SheetCut& cut, std::size_t& sheets) {
+                       const std::vector<std::uint8_t>& eligible, const SheetCut& cut, const OtherSides& other_sides,
+                       std::size_t& sheets) {
   sheets = 0;
   const std::size_t n = positions.size();
-  const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign);
+  std::vector<std::uint8_t> thin(n, 0);
+  for (std::size_t i = 0; i < n; ++i) thin[i] = other_sides[i][0] != UINT32_MAX ? 1 : 0;
+  const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign, thin);
   if (!probes.measured()) return 0;
   std::vector<double> inside, outside;
   probes.InsideOutside(normals, inside, outside);
@@ -611,13 +672,14 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
 
   // Sheets: samples joined in the kSheetGraph-nearest graph by chords along both tangent planes
   // and normals within the cut's angle of each other, signs included (a sign boundary on one
-  // smooth sheet, or the two sides of a thin wall, separate them).
+  // smooth sheet, or the two sides of a thin wall, separate them), and not across a thin wall
+  // (kThinWallShare).
   const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
   const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
   detail::UnionFind joined(n);
   for (std::size_t i = 0; i < n; ++i)
     for (const std::uint32_t j : graph[i]) {
-      if (j == i) continue;
+      if (j == i || OnOtherSides(other_sides, static_cast<std::uint32_t>(i), j)) continue;
       if (detail::OneSheet(positions[j] - positions[i], normals[i], normals[j], min_dot, cut.chord))
         joined.Unite(static_cast<std::uint32_t>(i), j);
     }
@@ -753,11 +815,12 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   const std::size_t n = positions.size();
   if (normals.size() != n || eligible.size() != n || coarse_fraction < 2) return 0;
   std::size_t flipped = 0;
+  const OtherSides other_sides = ThinWallOtherSides(positions, normals);  // lines: the same in every pass
   for (std::size_t pass = 0; pass < kSheetCuts.size(); ++pass) {
     SheetCut cut = kSheetCuts[pass];
     if (pass == 0) cut.most_fraction = coarse_fraction;
     std::size_t turned = 0;
-    flipped += TurnSheets(positions, normals, eligible, cut, turned);
+    flipped += TurnSheets(positions, normals, eligible, cut, other_sides, turned);
     sheets += turned;
   }
   return flipped;

@@ -143,7 +143,8 @@ std::vector<double> SampleAreas(const std::vector<V3>& positions, int k) {
   return areas;
 }
 
-SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V3>& normals, Walls walls)
+SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V3>& normals, Walls walls,
+                           std::span<const std::uint8_t> thin_walls)
     : positions_(positions) {
   const std::size_t n = positions.size();
   if (n <= kNeighbours || normals.size() != n) return;
@@ -163,11 +164,13 @@ SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V
         if (idx[m] == i) continue;
         if (nearest2 == 0.0) nearest2 = d2[m];
         const double facing = normals[idx[m]].dot(normals[i]);
-        // Not a wall thinner than the spacing (its other side the nearest samples): a probe held
-        // within 0.4 of it would read the neighbours' 1/r^2 dipoles, and the far probes turn such
-        // fins right (FlipSheetsByWinding's tests).
+        // Not a wall thinner than the spacing (its other side the nearest samples) unless the
+        // caller found it (thin_walls): elsewhere a stacked neighbour that near is a facet's step
+        // or a fin's root, and a probe held within 0.4 of it turned CGAL's pinion's facets and the
+        // fin's root row (FlipSheetsByWinding's tests) for nothing.
+        const bool thin = thin_walls.size() == n && thin_walls[i] != 0;
         const bool stacked = walls == Walls::kEitherSign && std::abs(facing) > 0.5 &&
-                             d2[m] > kStackedFromNearest * kStackedFromNearest * nearest2 &&
+                             (thin || d2[m] > kStackedFromNearest * kStackedFromNearest * nearest2) &&
                              std::abs(normals[i].dot(positions[idx[m]] - positions[i])) > 0.5 * std::sqrt(d2[m]);
         if (facing < -0.5 || stacked) {
           d = std::min(d, 0.4 * std::sqrt(d2[m]));

@@ -47,13 +47,19 @@ class SampleProbes {
     kOppositeNormals,  ///< n . n_j < -0.5 (as above)
     /// also a neighbour stacked along the normal whatever its sign: |n . n_j| > 0.5, the chord
     /// more than 30 degrees off the tangent plane, and farther than 1.5 x the nearest sample (a
-    /// wall thinner than that keeps the far probes). For sign searches, where a wall's two sides may
-    /// hold one sign: the elk's palms (2-3 spacings thick), whose wrong side's probes otherwise
-    /// reach past the wall's middle and read the flip of that side as a loss.
+    /// wall thinner than that keeps the far probes), or at any distance from a sample marked in
+    /// `thin_walls`. For sign searches, where a wall's two sides may hold one sign: the elk's palms
+    /// (2-3 spacings thick), whose wrong side's probes otherwise reach past the wall's middle and
+    /// read the flip of that side as a loss.
     kEitherSign,
   };
+  /// thin_walls (Walls::kEitherSign only; empty, or one flag per sample): samples on a wall thinner
+  /// than the spacing, whose other side was found by the caller (FlipSheetsByWinding: a two-sheet
+  /// fit of the nearest). Their probes stay within 0.4 of a stacked neighbour however near: the
+  /// sheet energy reads the dipoles nearest a probe as smoothed discs, and probes beyond the wall's
+  /// middle score a flip of either side the same (CGAL's rotor, blades 0.6 spacings thick).
   SampleProbes(const std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
-               Walls walls = Walls::kOppositeNormals);
+               Walls walls = Walls::kOppositeNormals, std::span<const std::uint8_t> thin_walls = {});
   /// J_i = w(P_i - d_i n_i) - w(P_i + d_i n_i), the sample's own dipole counted as the disc of
   /// area a_i it stands for (a dipole's 1/d^2 would decide the jump alone at small d): about 1 on
   /// a surface sampled with the right areas (a sphere: within 0.15, median 0.95); near 0 where the
