@@ -247,6 +247,11 @@ TEST_F(Cli, PointsOutHoldsTheEstimatedNormalsTheFieldWasBuiltFrom) {
   EXPECT_EQ(same.code, 2) << same.out;
   EXPECT_NE(same.out.find("the same path as -o"), std::string::npos) << same.out;
   EXPECT_FALSE(fs::exists(Path("x.palpa")));
+  // The same file spelt another way, before either exists.
+  const Outcome spelt = Palpa("build " + bare_in + " -o " + Path("x.palpa") + " --points-out " + Path("./x.palpa"));
+  EXPECT_EQ(spelt.code, 2) << spelt.out;
+  EXPECT_NE(spelt.out.find("the same path as -o"), std::string::npos) << spelt.out;
+  EXPECT_FALSE(fs::exists(Path("x.palpa")));
   const std::string bad = Write("bad.xyz", "1 2 3\n");
   EXPECT_EQ(Palpa("build " + bad + " -o " + Path("y.palpa") + " --points-out " + Path("y.xyz")).code, 2);
   EXPECT_FALSE(fs::exists(Path("y.xyz")));

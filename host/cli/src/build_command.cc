@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <span>
 #include <string>
@@ -93,7 +94,12 @@ int RunBuild(const BuildArgs& args) {
   // Before any work: a build can take minutes, and its target must not be a device or the input.
   if (const int refused = CheckOutput("build", args.output, {args.points}); refused != kExitOk) return refused;
   if (!args.points_out.empty()) {
-    if (args.points_out == args.output) {
+    // One file under two spellings (./x, a/../x, a link to the directory): neither exists yet, so
+    // CheckOutput's inode test cannot see it, and the blob would overwrite the points.
+    std::error_code ignored;
+    if (args.points_out == args.output ||
+        std::filesystem::weakly_canonical(std::filesystem::absolute(args.points_out, ignored), ignored) ==
+            std::filesystem::weakly_canonical(std::filesystem::absolute(args.output, ignored), ignored)) {
       fmt::print(stderr, "palpa build: --points-out {}: the same path as -o\n", args.points_out);
       return kExitBadInput;
     }
