@@ -626,7 +626,7 @@ TEST(Normals, FirstRowsNextToSharpEdgesOfNarrowFacesTakeTheirFacesPlane) {
   // edges) and a bar whose faces are 4.3 spacings wide (a gear tooth's, as on CGAL's pinion).
   // There a sample's 16 nearest span three faces, and the plane most of them lie on was as often
   // a blend or the next face: of the bar's samples 0.25-1 spacing from an edge (and a spacing
-  // from its open ends), 100 of 531 ended more than 20 degrees off (TakeFacePlanes: 9). Nearer an
+  // from its open ends), 100 of 531 ended more than 20 degrees off (TakeFacePlanes: 10). Nearer an
   // edge either face's plane is about as right, so those are not counted.
   struct Face {
     V3 origin, u, v, normal;  // origin + s u + t v, s, t in [0, 1]
@@ -684,7 +684,7 @@ TEST(Normals, FirstRowsNextToSharpEdgesOfNarrowFacesTakeTheirFacesPlane) {
       ++near;
       off += std::abs(normals[i].dot(set.normals[i])) < std::cos(20.0 * std::numbers::pi / 180) ? 1u : 0u;
     }
-    // Measured: box 2 of 365, prism 3 of 264, bar 9 of 531 (100 before TakeFacePlanes).
+    // Measured: box 2 of 365, prism 3 of 264, bar 10 of 531 (100 before TakeFacePlanes).
     EXPECT_LE(off, near * 3 / 100) << shape << ": " << off << " of " << near;
   }
 }
