@@ -61,6 +61,10 @@ double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx
     quadric += rows[a] * rows[a].transpose();
     quadric_rhs += rows[a] * h[a];
   }
+  // p's own row: the last one at p (p is one of the samples, or no row is and row 0 stands in).
+  std::size_t own_row = 0;
+  for (std::size_t a = 0; a < count; ++a)
+    if ((positions[idx[a]] - p).squaredNorm() == 0.0) own_row = a;
   double best = -1.0;
   for (std::size_t cut = kSheetMin; cut + kSheetMin <= count; ++cut) {
     for (std::size_t r = 0; r < count; ++r) rows[order[r]][6] = r >= cut ? 1.0 : 0.0;
@@ -84,10 +88,7 @@ double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx
     if (best < 0.0 || residual < best) {
       best = residual;
       if (other_sheet != nullptr) {
-        // p's own row is the one at p (height 0 after the fit's offset is taken off: any row at p).
-        double own = 0.0;
-        for (std::size_t a = 0; a < count; ++a)
-          if ((positions[idx[a]] - p).squaredNorm() == 0.0) own = rows[a][6];
+        const double own = rows[own_row][6];
         *other_sheet = 0;
         for (std::size_t a = 0; a < count; ++a)
           if (rows[a][6] != own) *other_sheet |= std::uint64_t{1} << a;
@@ -240,7 +241,7 @@ OtherSides ThinWallOtherSides(const std::vector<V3>& positions, const std::vecto
       if (!(two >= 0.0 && two < kThinWallShare * one)) continue;
       std::size_t m = 0;
       for (std::size_t a = 0; a < got && m < k; ++a)
-        if (((across >> a) & 1u) != 0 && idx[a] != i) other[i][m++] = static_cast<std::uint32_t>(idx[a]);
+        if (((across >> a) & 1u) != 0) other[i][m++] = static_cast<std::uint32_t>(idx[a]);
     }
   });
   return other;
@@ -718,12 +719,10 @@ double SmoothedDipole(const V3& p, double a, const V3& n, const V3& q) {
 // One pass of FlipSheetsByWinding with the sheets of `cut`.
 std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normals,
                        const std::vector<std::uint8_t>& eligible, const SheetCut& cut, const OtherSides& other_sides,
-                       std::size_t& sheets) {
+                       const std::vector<std::uint8_t>& thin_walls, std::size_t& sheets) {
   sheets = 0;
   const std::size_t n = positions.size();
-  std::vector<std::uint8_t> thin(n, 0);
-  for (std::size_t i = 0; i < n; ++i) thin[i] = other_sides[i][0] != UINT32_MAX ? 1 : 0;
-  const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign, thin);
+  const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign, thin_walls);
   if (!probes.measured()) return 0;
   std::vector<double> inside, outside;
   probes.InsideOutside(normals, inside, outside);
@@ -901,11 +900,13 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   if (normals.size() != n || eligible.size() != n || coarse_fraction < 2) return 0;
   std::size_t flipped = 0;
   const OtherSides other_sides = ThinWallOtherSides(positions, normals);  // lines: the same in every pass
+  std::vector<std::uint8_t> thin_walls(n, 0);  // samples with another side (SampleProbes' thin_walls)
+  for (std::size_t i = 0; i < n; ++i) thin_walls[i] = other_sides[i][0] != UINT32_MAX ? 1 : 0;
   for (std::size_t pass = 0; pass < kSheetCuts.size(); ++pass) {
     SheetCut cut = kSheetCuts[pass];
     if (pass == 0) cut.most_fraction = coarse_fraction;
     std::size_t turned = 0;
-    flipped += TurnSheets(positions, normals, eligible, cut, other_sides, turned);
+    flipped += TurnSheets(positions, normals, eligible, cut, other_sides, thin_walls, turned);
     sheets += turned;
   }
   return flipped;

@@ -160,6 +160,7 @@ SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V
       areas_[i] = std::numbers::pi * d2[got - 1] / static_cast<double>(got - 1);  // as SampleAreas
       double d = 0.5 * std::sqrt(d2[got - 1]);
       double nearest2 = 0.0;  // the nearest other sample's squared distance
+      const bool thin = thin_walls.size() == n && thin_walls[i] != 0;
       for (std::size_t m = 0; m < got; ++m) {
         if (idx[m] == i) continue;
         if (nearest2 == 0.0) nearest2 = d2[m];
@@ -168,7 +169,6 @@ SampleProbes::SampleProbes(const std::vector<V3>& positions, const std::vector<V
         // caller found it (thin_walls): elsewhere a stacked neighbour that near is a facet's step
         // or a fin's root, and a probe held within 0.4 of it turned CGAL's pinion's facets and the
         // fin's root row (FlipSheetsByWinding's tests) for nothing.
-        const bool thin = thin_walls.size() == n && thin_walls[i] != 0;
         const bool stacked = walls == Walls::kEitherSign && std::abs(facing) > 0.5 &&
                              (thin || d2[m] > kStackedFromNearest * kStackedFromNearest * nearest2) &&
                              std::abs(normals[i].dot(positions[idx[m]] - positions[i])) > 0.5 * std::sqrt(d2[m]);
