@@ -122,7 +122,11 @@ int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vect
 /// quadric through P_i fitted robustly to its 16 nearest (Tukey's biweight, cut at 0.06 x the 16th
 /// neighbour's distance), from whichever of their normals' frames most of them support, when it
 /// gathers 2 neighbours' weight more than the sample's own frame: a jet fit weighs a thin part's
-/// other side and the next face over a crease as much as its own surface.
+/// other side and the next face over a crease as much as its own surface. Then, on a clean set,
+/// first rows take a flat neighbour's plane (TakeFacePlanes); last, the plane through P_i and two
+/// of its 12 nearest that 5 or more of its 16 nearest lie on to 1e-4 x the 16th one's distance,
+/// with 90 % of the rest on one side of it (a ring's plane cuts the surface), is its normal: a flat
+/// face's exact plane (docs/field-methods.md § Exact facets).
 /// Parallel, deterministic.
 void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                        int jet_neighbours);
