@@ -622,6 +622,49 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearEdgesOfRandomSamples) {
   }
 }
 
+// A planar face: origin + s u + t v, s, t in [0, 1], with its outward normal.
+struct Face {
+  V3 origin, u, v, normal;
+};
+
+// Random samples on faces, their number shared by area; each one's distances to its face's
+// boundaries across u and across v (model units).
+struct FaceSamples {
+  Oriented set;
+  std::vector<double> along_u, along_v;
+  double spacing = 0;  // sqrt(area / samples)
+};
+
+FaceSamples SampleFaces(const std::vector<Face>& faces, std::size_t samples, std::mt19937& random) {
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  FaceSamples out;
+  double area = 0;
+  for (const Face& f : faces) area += f.u.cross(f.v).norm();
+  for (const Face& f : faces) {
+    const auto count = static_cast<int>(std::lround(static_cast<double>(samples) * f.u.cross(f.v).norm() / area));
+    for (int i = 0; i < count; ++i) {
+      const double s = unit(random), t = unit(random);
+      out.set.positions.push_back(f.origin + s * f.u + t * f.v);
+      out.set.normals.push_back(f.normal);
+      out.along_u.push_back(std::min(s, 1 - s) * f.u.norm());
+      out.along_v.push_back(std::min(t, 1 - t) * f.v.norm());
+    }
+  }
+  out.spacing = std::sqrt(area / static_cast<double>(out.set.positions.size()));
+  return out;
+}
+
+// Lines estimated, oriented and refined from positions alone, as `palpa build` does for a clean set.
+std::vector<V3> CleanRefinedLines(const std::vector<V3>& positions) {
+  std::vector<V3> normals;
+  const int neighbours = EstimateNormalLines(positions, normals);
+  EXPECT_EQ(neighbours, kCleanNormalNeighbours);
+  NormalsReport report;
+  OrientNormals(positions, normals, false, report, true);
+  RefineNormalLines(positions, normals, neighbours);
+  return normals;
+}
+
 TEST(Normals, FirstRowsNextToSharpEdgesOfNarrowFacesTakeTheirFacesPlane) {
   // Random samples on a box with wide faces (2 x 2 x 1), a hexagonal prism's sides (120-degree
   // edges) and a bar whose faces are 4.3 spacings wide (a gear tooth's, as on CGAL's pinion).
@@ -629,9 +672,6 @@ TEST(Normals, FirstRowsNextToSharpEdgesOfNarrowFacesTakeTheirFacesPlane) {
   // a blend or the next face: of the bar's samples 0.25-1 spacing from an edge (and a spacing
   // from its open ends), 100 of 531 ended more than 20 degrees off (TakeFacePlanes: 10). Nearer an
   // edge either face's plane is about as right, so those are not counted.
-  struct Face {
-    V3 origin, u, v, normal;  // origin + s u + t v, s, t in [0, 1]
-  };
   std::vector<std::vector<Face>> shapes = {{{{-1, -1, -0.5}, {2, 0, 0}, {0, 2, 0}, {0, 0, -1}},
                                             {{-1, -1, 0.5}, {2, 0, 0}, {0, 2, 0}, {0, 0, 1}},
                                             {{-1, -1, -0.5}, {0, 2, 0}, {0, 0, 1}, {-1, 0, 0}},
@@ -653,37 +693,17 @@ TEST(Normals, FirstRowsNextToSharpEdgesOfNarrowFacesTakeTheirFacesPlane) {
                     {{-2, w / 2, -w / 2}, {4, 0, 0}, {0, 0, w}, {0, 1, 0}}});
   const std::array<std::size_t, 3> samples{3000, 3000, 1500};
   std::mt19937 random(11);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (std::size_t shape = 0; shape < shapes.size(); ++shape) {
-    Oriented set;
-    std::vector<double> from_edge;  // to the nearest edge between two faces
-    std::vector<double> from_end;   // to an open end (the prism's and the bar's)
-    double area = 0;
-    for (const Face& f : shapes[shape]) area += f.u.cross(f.v).norm();
-    for (const Face& f : shapes[shape]) {
-      const auto count =
-          static_cast<int>(std::lround(static_cast<double>(samples[shape]) * f.u.cross(f.v).norm() / area));
-      for (int i = 0; i < count; ++i) {
-        const double s = unit(random), t = unit(random);
-        set.positions.push_back(f.origin + s * f.u + t * f.v);
-        set.normals.push_back(f.normal);
-        const double along_u = std::min(s, 1 - s) * f.u.norm(), along_v = std::min(t, 1 - t) * f.v.norm();
-        from_edge.push_back(shape == 0 ? std::min(along_u, along_v) : shape == 1 ? along_u : along_v);
-        from_end.push_back(shape == 0 ? 1.0 : shape == 1 ? along_v : along_u);
-      }
-    }
-    const double spacing = std::sqrt(area / static_cast<double>(set.positions.size()));
-    std::vector<V3> normals;
-    const int neighbours = EstimateNormalLines(set.positions, normals);
-    ASSERT_EQ(neighbours, kCleanNormalNeighbours) << shape;
-    NormalsReport report;
-    OrientNormals(set.positions, normals, false, report, true);
-    RefineNormalLines(set.positions, normals, neighbours);
+    const FaceSamples faces = SampleFaces(shapes[shape], samples[shape], random);
+    const std::vector<V3> normals = CleanRefinedLines(faces.set.positions);
     std::size_t near = 0, off = 0;
     for (std::size_t i = 0; i < normals.size(); ++i) {
-      if (from_edge[i] < 0.25 * spacing || from_edge[i] >= spacing || from_end[i] < spacing) continue;
+      const double u = faces.along_u[i], v = faces.along_v[i];
+      const double from_edge = shape == 0 ? std::min(u, v) : shape == 1 ? u : v;  // to an edge between two faces
+      const double from_end = shape == 0 ? 1.0 : shape == 1 ? v : u;  // to an open end (the prism's and the bar's)
+      if (from_edge < 0.25 * faces.spacing || from_edge >= faces.spacing || from_end < faces.spacing) continue;
       ++near;
-      off += std::abs(normals[i].dot(set.normals[i])) < std::cos(20.0 * std::numbers::pi / 180) ? 1u : 0u;
+      off += std::abs(normals[i].dot(faces.set.normals[i])) < std::cos(20.0 * std::numbers::pi / 180) ? 1u : 0u;
     }
     // Measured: box 2 of 365, prism 3 of 264, bar 10 of 531 (100 before TakeFacePlanes).
     EXPECT_LE(off, near * 3 / 100) << shape << ": " << off << " of " << near;
@@ -697,9 +717,6 @@ TEST(Normals, SamplesOfAFlatFaceTakeItsExactPlaneUpToTheEdgeAndRingsOfSamplesDoN
   // its 16 nearest lie on to 1e-4 of the 16th one's distance is its own face's (TakeExactFacets),
   // however few of them it has. Counted: samples 0.05-1 spacing from an edge, a spacing from the
   // bar's open ends; "exact" is within 0.01 degree.
-  struct Face {
-    V3 origin, u, v, normal;  // origin + s u + t v, s, t in [0, 1]
-  };
   const Eigen::Matrix3d turn =
       (Eigen::AngleAxisd(0.4, V3(1, 2, 3).normalized()) * Eigen::AngleAxisd(0.3, V3(0, 0, 1))).toRotationMatrix();
   const auto turned = [&](const std::vector<Face>& faces) {
@@ -720,36 +737,16 @@ TEST(Normals, SamplesOfAFlatFaceTakeItsExactPlaneUpToTheEdgeAndRingsOfSamplesDoN
                                                          {{-1, 1, -0.5}, {2, 0, 0}, {0, 0, 1}, {0, 1, 0}}})};
   const std::array<std::size_t, 2> samples{1500, 3000};
   std::mt19937 random(13);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (std::size_t shape = 0; shape < shapes.size(); ++shape) {
-    Oriented set;
-    std::vector<double> from_edge, from_end;
-    double area = 0;
-    for (const Face& f : shapes[shape]) area += f.u.cross(f.v).norm();
-    for (const Face& f : shapes[shape]) {
-      const auto count =
-          static_cast<int>(std::lround(static_cast<double>(samples[shape]) * f.u.cross(f.v).norm() / area));
-      for (int i = 0; i < count; ++i) {
-        const double s = unit(random), t = unit(random);
-        set.positions.push_back(f.origin + s * f.u + t * f.v);
-        set.normals.push_back(f.normal);
-        const double along_u = std::min(s, 1 - s) * f.u.norm(), along_v = std::min(t, 1 - t) * f.v.norm();
-        from_edge.push_back(shape == 0 ? along_v : std::min(along_u, along_v));
-        from_end.push_back(shape == 0 ? along_u : 1.0);
-      }
-    }
-    const double spacing = std::sqrt(area / static_cast<double>(set.positions.size()));
-    std::vector<V3> normals;
-    const int neighbours = EstimateNormalLines(set.positions, normals);
-    ASSERT_EQ(neighbours, kCleanNormalNeighbours) << shape;
-    NormalsReport report;
-    OrientNormals(set.positions, normals, false, report, true);
-    RefineNormalLines(set.positions, normals, neighbours);
+    const FaceSamples faces = SampleFaces(shapes[shape], samples[shape], random);
+    const std::vector<V3> normals = CleanRefinedLines(faces.set.positions);
     std::size_t near = 0, exact = 0, off = 0;
     for (std::size_t i = 0; i < normals.size(); ++i) {
-      if (from_edge[i] < 0.05 * spacing || from_edge[i] >= spacing || from_end[i] < spacing) continue;
+      const double u = faces.along_u[i], v = faces.along_v[i];
+      const double from_edge = shape == 0 ? v : std::min(u, v), from_end = shape == 0 ? u : 1.0;
+      if (from_edge < 0.05 * faces.spacing || from_edge >= faces.spacing || from_end < faces.spacing) continue;
       ++near;
-      const double along = std::abs(normals[i].dot(set.normals[i]));
+      const double along = std::abs(normals[i].dot(faces.set.normals[i]));
       exact += along > std::cos(0.01 * std::numbers::pi / 180) ? 1u : 0u;
       off += along < std::cos(20.0 * std::numbers::pi / 180) ? 1u : 0u;
     }
@@ -773,12 +770,7 @@ TEST(Normals, SamplesOfAFlatFaceTakeItsExactPlaneUpToTheEdgeAndRingsOfSamplesDoN
       rings.normals.push_back(turn * p);
     }
   }
-  std::vector<V3> normals;
-  const int ring_neighbours = EstimateNormalLines(rings.positions, normals);
-  ASSERT_EQ(ring_neighbours, kCleanNormalNeighbours);
-  NormalsReport report;
-  OrientNormals(rings.positions, normals, false, report, true);
-  RefineNormalLines(rings.positions, normals, ring_neighbours);
+  const std::vector<V3> normals = CleanRefinedLines(rings.positions);
   // A sample that took its ring's plane has the axis for its line.
   const V3 axis = turn * V3(0, 0, 1);
   std::size_t took = 0;
