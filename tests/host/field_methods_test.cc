@@ -208,6 +208,7 @@ TEST(HermiteTargets, CowHasNoWrongSignFarFromTheSurface) {
 // a facet and takes its plane (RefineNormalLines, kFacetShare): 2.0x (1.98). First rows then take
 // a flat neighbour's plane (TakeFacePlanes): 1.7x; and a sample on a facet, its exact plane
 // (TakeExactFacets): 1.48x, within the 1.5x, with 1 far-wrong node (a hole; target 100).
+// With the selection at the narrow width and the supporters' quadric (kSupportQuadric): 1.43x.
 TEST(HermiteTargets, EstimatedNormalsOfALowPolygonPartFollowItsFacets) {
   const EstimatedAgainstExact r = EstimateAndCompare("pinion.off");
   EXPECT_LT(r.ratio, 1.5);
