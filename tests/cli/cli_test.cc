@@ -252,6 +252,14 @@ TEST_F(Cli, PointsOutHoldsTheEstimatedNormalsTheFieldWasBuiltFrom) {
   EXPECT_EQ(spelt.code, 2) << spelt.out;
   EXPECT_NE(spelt.out.find("the same path as -o"), std::string::npos) << spelt.out;
   EXPECT_FALSE(fs::exists(Path("x.palpa")));
+  // ... and through a link to its directory.
+  fs::create_directory(Path("dir"));
+  fs::create_directory_symlink(Path("dir"), Path("link"));
+  const Outcome linked =
+      Palpa("build " + bare_in + " -o " + Path("dir/x.palpa") + " --points-out " + Path("link/x.palpa"));
+  EXPECT_EQ(linked.code, 2) << linked.out;
+  EXPECT_NE(linked.out.find("the same path as -o"), std::string::npos) << linked.out;
+  EXPECT_FALSE(fs::exists(Path("dir/x.palpa")));
   const std::string bad = Write("bad.xyz", "1 2 3\n");
   EXPECT_EQ(Palpa("build " + bad + " -o " + Path("y.palpa") + " --points-out " + Path("y.xyz")).code, 2);
   EXPECT_FALSE(fs::exists(Path("y.xyz")));

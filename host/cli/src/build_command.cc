@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <memory>
 #include <span>
 #include <string>
@@ -96,10 +95,7 @@ int RunBuild(const BuildArgs& args) {
   if (!args.points_out.empty()) {
     // One file under two spellings (./x, a/../x, a link to the directory): neither exists yet, so
     // CheckOutput's inode test cannot see it, and the blob would overwrite the points.
-    std::error_code ignored;
-    if (args.points_out == args.output ||
-        std::filesystem::weakly_canonical(std::filesystem::absolute(args.points_out, ignored), ignored) ==
-            std::filesystem::weakly_canonical(std::filesystem::absolute(args.output, ignored), ignored)) {
+    if (SamePath(args.points_out, args.output)) {
       fmt::print(stderr, "palpa build: --points-out {}: the same path as -o\n", args.points_out);
       return kExitBadInput;
     }

@@ -22,6 +22,11 @@ inline constexpr int kExitBadInput = 2;
 [[nodiscard]] int CheckOutput(const char* command, const std::string& path,
                               const std::vector<std::string>& inputs = {});
 
+/// Whether two paths name one file, existing or not (./x, a/../x, a link to the directory): equal
+/// as given, or their absolute, lexically normal, link-resolved forms (std::filesystem::
+/// weakly_canonical) are equal. A path that cannot be resolved is compared as given only.
+[[nodiscard]] bool SamePath(const std::string& a, const std::string& b);
+
 struct BuildArgs {
   std::string points;                ///< .xyz / .pwn / .ply
   std::string output;                ///< FIELD.palpa
