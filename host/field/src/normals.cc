@@ -362,6 +362,8 @@ struct HeightRows {
     c = normal_matrix.ldlt().solve(rhs);
     return c.allFinite();
   }
+  // Row m's offset from the function c, in units of scale.
+  double Residual(std::size_t m, const V5& c) const { return heights[m] - rows[m].dot(c); }
   // The fit's unit normal at p (u = v = 0).
   V3 NormalAtP(const V5& c) const { return V3(axis - c[0] * t1 - c[1] * t2).normalized(); }
 
@@ -384,7 +386,7 @@ QuadricFit RobustQuadricThrough(const std::vector<V3>& positions, const std::siz
     if (!h.Solve(weights, c)) return fit;
     fit.support = 0;
     for (std::size_t m = 0; m < h.count; ++m) {
-      const double r = (h.heights[m] - h.rows[m].dot(c)) / 3.0;  // heights are in scales; the cut is 3
+      const double r = h.Residual(m, c) / 3.0;  // heights are in scales; the cut is 3
       const double t = std::max(0.0, 1.0 - r * r);
       weights[m] = t * t;
       fit.support += weights[m];
@@ -392,6 +394,31 @@ QuadricFit RobustQuadricThrough(const std::vector<V3>& positions, const std::siz
   }
   fit.normal = h.NormalAtP(c);
   return fit;
+}
+
+// RefineNormalLines' clean-set fit (kSupportQuadric): the normal at p of HeightRows' function over
+// the frame of `plane`, fitted to the neighbours within `width` of that plane, then again to those
+// within kSelectWidth x width of the first fit, which drops the next face's nearest samples that
+// it bent towards (a cylinder's first rows next to a flat cap: median 1.33 -> 0.29 degrees).
+// `plane` itself when either fit has fewer than kSupportQuadric neighbours or is singular.
+V3 SupportersQuadricNormal(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
+                           const V3& plane, double scale, double width) {
+  const HeightRows h(positions, idx, count, p, plane, scale);
+  std::array<double, kRefineNeighbours + 1> inside{};
+  // The neighbours within `cut` of the function c (zero: the plane) as 0/1 weights; their count.
+  const auto within = [&](const HeightRows::V5& c, double cut) {
+    std::size_t on = 0;
+    for (std::size_t m = 0; m < h.count; ++m) {
+      inside[m] = std::abs(h.Residual(m, c)) * scale < cut ? 1.0 : 0.0;
+      on += inside[m] > 0 ? 1u : 0u;
+    }
+    return on;
+  };
+  HeightRows::V5 c = HeightRows::V5::Zero();
+  if (within(c, width) >= kSupportQuadric && h.Solve(inside, c) && within(c, kSelectWidth * width) >= kSupportQuadric &&
+      h.Solve(inside, c))
+    return h.NormalAtP(c);
+  return plane;
 }
 
 }  // namespace
@@ -484,20 +511,36 @@ void ForEachTriplePlane(const std::vector<V3>& positions, const std::size_t* idx
   }
 }
 
+// Each sample's k + 1 nearest samples (itself first, k <= kRefineNeighbours) and the distance to
+// the last: the steps of RefineNormalLines all read this neighbourhood, searched once.
+struct Neighbourhoods {
+  Neighbourhoods(const std::vector<V3>& positions, const detail::KdTree& tree, std::size_t k)
+      : idx(positions.size()), got(positions.size()), radius(positions.size()) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
+      std::array<double, kRefineNeighbours + 1> d2{};
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        got[i] = tree.knnSearch(positions[i].data(), k + 1, idx[i].data(), d2.data());
+        radius[i] = std::sqrt(d2[got[i] - 1]);
+      }
+    });
+  }
+  std::vector<std::array<std::size_t, kRefineNeighbours + 1>> idx;
+  std::vector<std::size_t> got;
+  std::vector<double> radius;
+};
+
 // RefineNormalLines' next-to-last step (kConfidentShare): first rows take a face's plane. Rim
 // samples (kept as their jet fit) neither take nor give one.
-void TakeFacePlanes(const std::vector<V3>& positions, const detail::KdTree& tree, const std::vector<std::uint8_t>& rim,
-                    std::vector<V3>& normals) {
+void TakeFacePlanes(const std::vector<V3>& positions, const detail::KdTree& tree, const Neighbourhoods& near,
+                    const std::vector<std::uint8_t>& rim, std::vector<V3>& normals) {
   const std::size_t n = positions.size();
-  const std::size_t k = std::min<std::size_t>(kRefineNeighbours, n - 1);
   const std::vector<V3> refined = normals;
   std::vector<double> share(n, 0.0), flat(n, 1.0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::vector<std::size_t> idx(k + 1);
-    std::vector<double> d2(k + 1);
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
-      const double width = kRefineWidth * std::sqrt(d2[got - 1]);
+      const auto& idx = near.idx[i];
+      const std::size_t got = near.got[i];
+      const double width = kRefineWidth * near.radius[i];
       std::size_t on = 0;
       double sum2 = 0.0;
       for (std::size_t m = 0; m < got; ++m) {
@@ -538,17 +581,15 @@ void TakeFacePlanes(const std::vector<V3>& positions, const detail::KdTree& tree
 
 // RefineNormalLines' very last step on a clean set (kExactFacetWidth): a sample on a facet takes
 // the facet's plane. The sign is kept.
-void TakeExactFacets(const std::vector<V3>& positions, const detail::KdTree& tree, std::vector<V3>& normals) {
+void TakeExactFacets(const std::vector<V3>& positions, const Neighbourhoods& near, std::vector<V3>& normals) {
   const std::size_t n = positions.size();
-  const std::size_t k = std::min<std::size_t>(kRefineNeighbours, n - 1);
   const std::vector<V3> lines = normals;  // the supporters' lines as they came, whatever this step does
   const double agree = std::cos(kFacetAgreeDeg * std::numbers::pi / 180.0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::array<std::size_t, kRefineNeighbours + 1> idx{};
-    std::array<double, kRefineNeighbours + 1> d2{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
-      const double exact = kExactFacetWidth * std::sqrt(d2[got - 1]);
+      const auto& idx = near.idx[i];
+      const std::size_t got = near.got[i];
+      const double exact = kExactFacetWidth * near.radius[i];
       std::size_t best = 0;
       V3 facet = normals[i];
       ForEachTriplePlane(positions, idx.data(), got, i, [&](const V3& plane) {
@@ -584,6 +625,7 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
   const std::size_t k = std::min<std::size_t>(kRefineNeighbours, n - 1);
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const Neighbourhoods near(positions, tree, k);
   const std::vector<V3> start = normals;
   // The noise, one figure for the whole set (a scanner's noise is much the same everywhere): the
   // median over the samples of the median offset of their neighbours from their smooth plane,
@@ -593,17 +635,17 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
   std::vector<double> offset(n);
   std::vector<double> quadric(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::vector<std::size_t> idx(k + 1);
-    std::vector<double> d2(k + 1), residual(k + 1);
+    std::vector<double> residual(k + 1);
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
+      const auto& idx = near.idx[i];
+      const std::size_t got = near.got[i];
       for (std::size_t m = 0; m < got; ++m) residual[m] = std::abs(start[i].dot(positions[idx[m]] - positions[i]));
       std::nth_element(residual.begin(), residual.begin() + static_cast<std::ptrdiff_t>(got / 2),
                        residual.begin() + static_cast<std::ptrdiff_t>(got));
       offset[i] = residual[got / 2];
       // Every neighbour: the residual of a surface's own curvature is ~0, of noise the noise.
-      quadric[i] = std::max(detail::QuadricResidual(positions, idx.data(), got, positions[i], start[i],
-                                                    std::sqrt(d2[got - 1]), 8, [](std::size_t) { return true; }),
+      quadric[i] = std::max(detail::QuadricResidual(positions, idx.data(), got, positions[i], start[i], near.radius[i],
+                                                    8, [](std::size_t) { return true; }),
                             0.0);
     }
   });
@@ -612,14 +654,14 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
   const bool clean = jet_neighbours == kCleanNormalNeighbours;
   std::vector<std::uint8_t> rim(n, 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::vector<std::size_t> idx(k + 1);
-    std::vector<double> d2(k + 1), weight(k + 1);
+    std::vector<double> weight(k + 1);
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
+      const auto& idx = near.idx[i];
+      const std::size_t got = near.got[i];
       // The width of a plane's support: a tenth of the neighbourhood's radius. Where the noise
       // is larger than that, the jet fit's average is the better normal: kept, unless the
       // neighbourhood is a facet (kFacetShare, below): sigma counts curvature and creases too.
-      const double width = kRefineWidth * std::sqrt(d2[got - 1]);
+      const double width = kRefineWidth * near.radius[i];
       const bool rough = 2.0 * sigma > width;
       // A rim sample (detail::kRimGap) keeps its jet fit: the planes through it extrapolate from
       // one side and tilt (a dome's rim: 1.7 degrees on the median against the jet fit's 0.0),
@@ -666,7 +708,7 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
       if (rough && on_plane(normal, kSelectWidth * width) < kFacetShare * static_cast<double>(got)) {
         // Here the noise figure counted curvature and creases; on a clean set they are no noise.
         if (!clean) continue;
-        const double scale = kQuadricScale * std::sqrt(d2[got - 1]);
+        const double scale = kQuadricScale * near.radius[i];
         QuadricFit fitted;
         double own = 0;  // the support from its own jet normal's frame (idx[0] is i)
         for (std::size_t c = 0; c < got; ++c) {
@@ -685,35 +727,14 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
             detail::FitLeastVariancePlane(positions, idx.data(), got, [&](std::size_t m) { return weight[m]; }).normal;
         normal = line.dot(normal) < 0 ? V3(-line) : line;
       }
-      if (clean) {
-        const double scale = std::sqrt(d2[got - 1]);
-        const HeightRows h(positions, idx.data(), got, positions[i], normal, scale);
-        std::array<double, kRefineNeighbours + 1> inside{};
-        // The neighbours within `cut` of the height function c (zero: the plane) as 0/1 weights;
-        // their count.
-        const auto within = [&](const HeightRows::V5& c, double cut) {
-          std::size_t count = 0;
-          for (std::size_t m = 0; m < h.count; ++m) {
-            const bool on = std::abs(h.heights[m] - h.rows[m].dot(c)) * scale < cut;
-            inside[m] = on ? 1.0 : 0.0;
-            count += on ? 1u : 0u;
-          }
-          return count;
-        };
-        // Fitted twice: the second time to the neighbours within the narrow width of the first
-        // fit, which drops the next face's nearest samples that the first one bent towards (a
-        // cylinder's first rows next to a flat cap: median 1.33 -> 0.29 degrees).
-        HeightRows::V5 c = HeightRows::V5::Zero();
-        if (within(c, width) >= kSupportQuadric && h.Solve(inside, c) &&
-            within(c, kSelectWidth * width) >= kSupportQuadric && h.Solve(inside, c))
-          normal = h.NormalAtP(c);
-      }
+      if (clean)
+        normal = SupportersQuadricNormal(positions, idx.data(), got, positions[i], normal, near.radius[i], width);
       normals[i] = normal;
     }
   });
   if (clean) {
-    TakeFacePlanes(positions, tree, rim, normals);
-    TakeExactFacets(positions, tree, normals);
+    TakeFacePlanes(positions, tree, near, rim, normals);
+    TakeExactFacets(positions, near, normals);
   }
 }
 
