@@ -177,6 +177,7 @@ constexpr double kConfidentShare = 0.5;
 // (the pinion 1.60 -> 1.70 % on seed 1).
 constexpr double kFlatFace = 0.3;
 constexpr std::size_t kFaceNeighbours = 12;
+static_assert(kFaceNeighbours <= kRefineNeighbours + 1, "TakeFacePlanes reads the searched neighbourhood");
 constexpr double kFaceMinDeg = 10.0;
 constexpr double kFaceChordSin = 0.03;
 // And after that, a clean set's facets: the plane through P_i and two of its kTripleNeighbours
@@ -531,8 +532,8 @@ struct Neighbourhoods {
 
 // RefineNormalLines' next-to-last step (kConfidentShare): first rows take a face's plane. Rim
 // samples (kept as their jet fit) neither take nor give one.
-void TakeFacePlanes(const std::vector<V3>& positions, const detail::KdTree& tree, const Neighbourhoods& near,
-                    const std::vector<std::uint8_t>& rim, std::vector<V3>& normals) {
+void TakeFacePlanes(const std::vector<V3>& positions, const Neighbourhoods& near, const std::vector<std::uint8_t>& rim,
+                    std::vector<V3>& normals) {
   const std::size_t n = positions.size();
   const std::vector<V3> refined = normals;
   std::vector<double> share(n, 0.0), flat(n, 1.0);
@@ -556,18 +557,19 @@ void TakeFacePlanes(const std::vector<V3>& positions, const detail::KdTree& tree
   });
   const double turn = std::cos(kFaceMinDeg * std::numbers::pi / 180.0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    std::array<std::size_t, kFaceNeighbours> idx{};
-    std::array<double, kFaceNeighbours> d2{};
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (rim[i] != 0 || share[i] >= kConfidentShare) continue;
-      const std::size_t got = tree.knnSearch(positions[i].data(), kFaceNeighbours, idx.data(), d2.data());
+      // The kFaceNeighbours nearest: the first of the searched neighbourhood.
+      const auto& idx = near.idx[i];
+      const std::size_t got = std::min(near.got[i], kFaceNeighbours);
       double nearest = kFaceChordSin;
       std::size_t face = n;
       for (std::size_t m = 0; m < got; ++m) {
         const std::size_t j = idx[m];
-        if (j == i || rim[j] != 0 || share[j] < kConfidentShare || !(d2[m] > 0) || flat[j] > kFlatFace) continue;
-        if (std::abs(refined[j].dot(refined[i])) > turn) continue;
         const V3 chord = positions[i] - positions[j];
+        if (j == i || rim[j] != 0 || share[j] < kConfidentShare || !(chord.squaredNorm() > 0) || flat[j] > kFlatFace)
+          continue;
+        if (std::abs(refined[j].dot(refined[i])) > turn) continue;
         const double off = std::abs(refined[j].dot(chord)) / chord.norm();
         if (off < nearest || (off == nearest && face < n && share[j] > share[face])) {
           nearest = off;
@@ -733,7 +735,7 @@ void RefineNormalLines(const std::vector<V3>& positions, std::vector<V3>& normal
     }
   });
   if (clean) {
-    TakeFacePlanes(positions, tree, near, rim, normals);
+    TakeFacePlanes(positions, near, rim, normals);
     TakeExactFacets(positions, near, normals);
   }
 }
