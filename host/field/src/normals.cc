@@ -340,6 +340,7 @@ struct QuadricFit {
 // v^2) and heights of idx[0..count), at most kRefineNeighbours + 1 of them.
 struct HeightRows {
   using V5 = Eigen::Matrix<double, 5, 1>;
+  using Weights = std::array<double, kRefineNeighbours + 1>;  // one per row
   HeightRows(const std::vector<V3>& positions, const std::size_t* idx, std::size_t n, const V3& p, const V3& axis_in,
              double scale)
       : axis(axis_in), count(std::min(n, rows.size())) {
@@ -352,7 +353,7 @@ struct HeightRows {
     }
   }
   // Weighted least squares; false if singular.
-  bool Solve(const std::array<double, kRefineNeighbours + 1>& weights, V5& c) const {
+  bool Solve(const Weights& weights, V5& c) const {
     Eigen::Matrix<double, 5, 5> normal_matrix = Eigen::Matrix<double, 5, 5>::Zero();
     V5 rhs = V5::Zero();
     for (std::size_t m = 0; m < count; ++m) {
@@ -379,7 +380,7 @@ struct HeightRows {
 QuadricFit RobustQuadricThrough(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count,
                                 const V3& p, const V3& axis, double scale) {
   const HeightRows h(positions, idx, count, p, axis, scale);
-  std::array<double, kRefineNeighbours + 1> weights{};
+  HeightRows::Weights weights{};
   std::fill_n(weights.begin(), h.count, 1.0);
   QuadricFit fit;
   HeightRows::V5 c = HeightRows::V5::Zero();
@@ -405,7 +406,7 @@ QuadricFit RobustQuadricThrough(const std::vector<V3>& positions, const std::siz
 V3 SupportersQuadricNormal(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
                            const V3& plane, double scale, double width) {
   const HeightRows h(positions, idx, count, p, plane, scale);
-  std::array<double, kRefineNeighbours + 1> inside{};
+  HeightRows::Weights inside{};
   // The neighbours within `cut` of the function c (zero: the plane) as 0/1 weights; their count.
   const auto within = [&](const HeightRows::V5& c, double cut) {
     std::size_t on = 0;
