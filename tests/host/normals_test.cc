@@ -63,6 +63,16 @@ Oriented Cube(int m) {
   return out;
 }
 
+// The angle in degrees between a line and a unit normal, whatever the line's sign.
+double LineAngleDeg(const V3& line, const V3& normal) {
+  return std::acos(std::min(1.0, std::abs(line.dot(normal)))) * 180.0 / std::numbers::pi;
+}
+
+double MedianOf(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
 double WorstAngleDeg(const std::vector<V3>& got, const std::vector<V3>& want) {
   double worst = 0;
   for (std::size_t i = 0; i < got.size(); ++i)
@@ -179,10 +189,8 @@ TEST(Normals, VeryNoisySamplesWidenTheFit) {
   EXPECT_LE(neighbours, kMostNormalNeighbours);
   std::vector<double> angle;
   for (std::size_t i = 0; i < lines.size(); ++i)
-    angle.push_back(std::acos(std::min(1.0, std::abs(lines[i].dot(noisy.positions[i].normalized())))) * 180.0 /
-                    std::numbers::pi);
-  std::nth_element(angle.begin(), angle.begin() + static_cast<std::ptrdiff_t>(angle.size() / 2), angle.end());
-  EXPECT_LT(angle[angle.size() / 2], 8.0) << neighbours << " neighbours";
+    angle.push_back(LineAngleDeg(lines[i], noisy.positions[i].normalized()));
+  EXPECT_LT(MedianOf(angle), 8.0) << neighbours << " neighbours";
 }
 
 TEST(Normals, RimSamplesOfAnOpenScanKeepTheirJetFit) {
@@ -208,8 +216,7 @@ TEST(Normals, RimSamplesOfAnOpenScanKeepTheirJetFit) {
       rim.push_back(std::acos(std::min(1.0, normals[i].dot(positions[i]))) * 180.0 / std::numbers::pi);
   }
   ASSERT_GT(rim.size(), 100u);
-  std::nth_element(rim.begin(), rim.begin() + static_cast<std::ptrdiff_t>(rim.size() / 2), rim.end());
-  EXPECT_LT(rim[rim.size() / 2], 0.5);
+  EXPECT_LT(MedianOf(rim), 0.5);
 }
 
 TEST(Normals, EstimatedAndOrientedSphereIsOutward) {
@@ -782,16 +789,6 @@ TEST(Normals, SamplesOfAFlatFaceTakeItsExactPlaneUpToTheEdgeAndRingsOfSamplesDoN
     took += std::abs(normals[i].dot(axis)) > std::cos(0.01 * std::numbers::pi / 180) ? 1u : 0u;
   std::printf("[ facets ] UV sphere: %zu of %zu samples took their ring's plane\n", took, normals.size() - 4 * 48);
   EXPECT_EQ(took, 0u);
-}
-
-// The angle in degrees between a line and a unit normal, whatever the line's sign.
-double LineAngleDeg(const V3& line, const V3& normal) {
-  return std::acos(std::min(1.0, std::abs(line.dot(normal)))) * 180.0 / std::numbers::pi;
-}
-
-double MedianOf(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
 }
 
 TEST(Normals, RefinedLinesOfACurvedSurfaceAreItsNormalsAtTheSamples) {
