@@ -261,14 +261,14 @@ using OtherSides = std::vector<std::array<std::uint32_t, kCleanNormalNeighbours>
 
 // For each sample, the neighbours on a thin wall's other side (kThinWallShare), UINT32_MAX after
 // the last. `lines`: the normals' lines (their signs do not matter).
-OtherSides ThinWallOtherSides(const std::vector<V3>& positions, const std::vector<V3>& lines) {
+// `tree`: the k-d tree of `positions` (leaves of 10).
+OtherSides ThinWallOtherSides(const std::vector<V3>& positions, const std::vector<V3>& lines,
+                              const detail::KdTree& tree) {
   const std::size_t n = positions.size();
   OtherSides other(n);
   for (auto& o : other) o.fill(UINT32_MAX);
   constexpr auto k = static_cast<std::size_t>(kCleanNormalNeighbours);
   if (n <= k) return other;
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::array<std::size_t, k + 1> idx{};
     std::array<double, k + 1> d2{};
@@ -871,10 +871,18 @@ double SmoothedDipole(const V3& p, double a, const V3& n, const V3& q) {
   return a * n.dot(d) / (4.0 * std::numbers::pi * r2 * std::sqrt(r2));
 }
 
+// The positions' k-d tree (leaves of 10) and kSheetGraph-nearest graph, which every pass of
+// FlipSheetsByWinding reads: they depend on the positions only.
+struct SheetNeighbours {
+  const detail::KdTree& tree;
+  const std::vector<std::array<std::uint32_t, kSheetGraph>>& graph;
+};
+
 // One pass of FlipSheetsByWinding with the sheets of `cut`.
 std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normals,
                        const std::vector<std::uint8_t>& eligible, const SheetCut& cut, const OtherSides& other_sides,
-                       const std::vector<std::uint8_t>& thin_walls, std::size_t& sheets) {
+                       const std::vector<std::uint8_t>& thin_walls, const SheetNeighbours& neighbours,
+                       std::size_t& sheets) {
   sheets = 0;
   const std::size_t n = positions.size();
   const SampleProbes probes(positions, normals, SampleProbes::Walls::kEitherSign, thin_walls);
@@ -883,8 +891,7 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   probes.InsideOutside(normals, inside, outside);
   const std::vector<double>& areas = probes.areas();
   const std::vector<double>& offsets = probes.offsets();
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const detail::KdTree& tree = neighbours.tree;
   // The winding tree's point dipoles near each probe become smoothed ones (its own sample's is
   // already the disc).
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
@@ -913,7 +920,7 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   // and normals within the cut's angle of each other, signs included (a sign boundary on one
   // smooth sheet, or the two sides of a thin wall, separate them), and not across a thin wall
   // (kThinWallShare).
-  const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
+  const std::vector<std::array<std::uint32_t, kSheetGraph>>& graph = neighbours.graph;
   const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
   detail::UnionFind joined(n);
   for (std::size_t i = 0; i < n; ++i)
@@ -1054,14 +1061,18 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
   const std::size_t n = positions.size();
   if (normals.size() != n || eligible.size() != n || coarse_fraction < 2) return 0;
   std::size_t flipped = 0;
-  const OtherSides other_sides = ThinWallOtherSides(positions, normals);  // lines: the same in every pass
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
+  const SheetNeighbours neighbours{tree, graph};
+  const OtherSides other_sides = ThinWallOtherSides(positions, normals, tree);  // lines: the same in every pass
   std::vector<std::uint8_t> thin_walls(n, 0);  // samples with another side (SampleProbes' thin_walls)
   for (std::size_t i = 0; i < n; ++i) thin_walls[i] = other_sides[i][0] != UINT32_MAX ? 1 : 0;
   for (std::size_t pass = 0; pass < kSheetCuts.size(); ++pass) {
     SheetCut cut = kSheetCuts[pass];
     if (pass == 0) cut.most_fraction = coarse_fraction;
     std::size_t turned = 0;
-    flipped += TurnSheets(positions, normals, eligible, cut, other_sides, thin_walls, turned);
+    flipped += TurnSheets(positions, normals, eligible, cut, other_sides, thin_walls, neighbours, turned);
     sheets += turned;
   }
   return flipped;
