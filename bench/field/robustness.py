@@ -30,7 +30,9 @@ missing; `--no-poisson` skips the column.
 
 The last column judges palpa's row against the issue's targets (`verdict` below: Poisson, the
 clean row of the same mesh, fixed counts), and the run ends with how many rows meet them and what
-each other row missed. `--meshes bundled` runs every closed mesh in data/.
+each other row missed. `--meshes bundled` runs every closed mesh in data/. A mesh that `palpa sample`
+refuses (non-manifold or inconsistently oriented: no truth to score against) is skipped and named
+at the end, with palpa's message, instead of ending the run.
 """
 import argparse
 import json
@@ -308,12 +310,18 @@ def main():
     meshes = args.meshes.split(",")
     if args.meshes == "bundled":
         meshes = sorted(os.path.splitext(f)[0] for f in os.listdir("data") if f.endswith(".off"))
-    judged, missed = 0, []
+    judged, missed, skipped = 0, [], []
     for name in meshes:
         mesh = name if name.endswith(".off") else f"data/{name}.off"
         name = os.path.splitext(os.path.basename(mesh))[0]
         base = os.path.join(args.work, f"{name}-5000.xyz")
-        run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", base, "-q")
+        try:
+            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", base, "-q")
+        except subprocess.CalledProcessError as e:
+            # A mesh palpa cannot sample (non-manifold, inconsistently oriented) has no truth to
+            # score against: say so and go on with the others.
+            skipped.append(f"{mesh}: {e.stderr.strip() or f'palpa sample exit {e.returncode}'}")
+            continue
         pts = read_xyz(base)
         # The voxel in model units: the fit maps the longest side to --fit metres over `cells` nodes.
         probe = os.path.join(args.work, "probe.palpa")
@@ -367,6 +375,8 @@ def main():
           f"met on {judged - len(missed)} of {judged} rows.")
     for m in missed:
         print(f"- missed: {m}")
+    for m in skipped:
+        print(f"- skipped (not a closed, consistently oriented mesh): {m}")
 
 
 if __name__ == "__main__":
