@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 #include "field_fixtures.h"
@@ -539,6 +540,35 @@ TEST_F(EvalCli, ReportsPhantomSolidAndHoles) {
       << t.out;
   EXPECT_NE(t.out.find(fmt::format("phantom solid     {} nodes, deepest", phantoms)), std::string::npos) << t.out;
   EXPECT_NE(t.out.find("holes             0 nodes"), std::string::npos) << t.out;
+  // --far-out lists each of them, in model units (device = scale model + offset), with its depth.
+  const std::string far = Path("far.xyz");
+  const Outcome f = Palpa("eval " + field + " --sphere 10 --far-out " + far);
+  ASSERT_EQ(f.code, 0) << f.out;
+  std::ifstream in(far);
+  std::string line;
+  std::size_t listed = 0;
+  double deepest = 0;
+  while (std::getline(in, line)) {
+    if (line.starts_with("#")) continue;
+    std::istringstream row(line);
+    Eigen::Vector3d p;
+    double depth = 0;
+    std::string kind;
+    ASSERT_TRUE(row >> p.x() >> p.y() >> p.z() >> depth >> kind) << line;
+    EXPECT_EQ(kind, "phantom") << line;
+    const Eigen::Vector3d device = s.fit_scale * p + s.fit_offset_m;
+    EXPECT_LT((device - phantom_centre).norm(), 3e-3) << line;
+    // The analytic sphere's distance, in voxels, at the listed node.
+    EXPECT_NEAR(depth, SphereSdfVoxels(s, device), 1e-3) << line;
+    EXPECT_GT(depth, 3.0) << line;
+    deepest = std::max(deepest, depth);
+    ++listed;
+  }
+  EXPECT_EQ(static_cast<double>(listed), phantoms);
+  EXPECT_NEAR(deepest, json["score"]["phantom_solid"]["deepest_voxels"].get<double>(), 1e-3);
+  // The field itself is never the target.
+  const Outcome same = Palpa("eval " + field + " --sphere 10 --far-out " + field);
+  EXPECT_EQ(same.code, 2) << same.out;
 }
 
 TEST_F(EvalCli, BadInputsExitTwo) {

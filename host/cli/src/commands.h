@@ -107,6 +107,7 @@ struct EvalArgs {
   bool band_given = false;     ///< --band on the command line (else 3, or less to fit the field's bands)
   int threads = 0;             ///< 0: all cores
   std::string candidate_mesh;  ///< score this closed .off mesh (model units) on FIELD's grid instead of FIELD
+  std::string far_out;         ///< FAR.xyz: every far wrong-sign node (model units), written atomically
 };
 int RunEval(const EvalArgs& args);
 

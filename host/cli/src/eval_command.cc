@@ -5,12 +5,16 @@
 #include <algorithm>
 #include <chrono>
 #include <memory>
+#include <span>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "palpa/io/atomic_file.h"
 #include "palpa/mesh/eval.h"
 #include "palpa/mesh/field_file.h"
 #include "palpa/mesh/triangle_mesh.h"
@@ -49,6 +53,22 @@ nlohmann::ordered_json ScoreJson(const mesh::EvalResult& r) {
           {"holes", FarJson(r.holes)}};
 }
 
+// --far-out's lines: each far wrong-sign node in model units (the inverse of the field's fit),
+// its |true| in voxels and its kind, phantoms first; a comment line heads them.
+std::string FarNodesText(const mesh::EvalResult& r, const blob::FieldView& v) {
+  std::string text = fmt::format(
+      "# far wrong-sign nodes (|true| > 3 voxels): x y z (model units) depth (voxels) "
+      "kind; {} phantom, {} hole\n",
+      r.phantom_solid.nodes, r.holes.nodes);
+  const Eigen::Vector3d offset(v.fit_offset_m[0], v.fit_offset_m[1], v.fit_offset_m[2]);
+  for (const auto& [far, kind] : {std::pair{&r.phantom_solid, "phantom"}, std::pair{&r.holes, "hole"}})
+    for (std::size_t c = 0; c < far->at_m.size(); ++c) {
+      const Eigen::Vector3d p = (far->at_m[c] - offset) / v.fit_scale;
+      text += fmt::format("{:.9g} {:.9g} {:.9g} {:.3f} {}\n", p.x(), p.y(), p.z(), far->depths_voxels[c], kind);
+    }
+  return text;
+}
+
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -60,6 +80,12 @@ int RunEval(const EvalArgs& args) {
   if (args.threads > 0)
     threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                     static_cast<std::size_t>(args.threads));
+  if (!args.far_out.empty()) {
+    std::vector<std::string> inputs = {args.field};
+    for (const std::string& m : {args.mesh, args.candidate_mesh})
+      if (!m.empty()) inputs.push_back(m);
+    if (const int refused = CheckOutput("eval", args.far_out, inputs); refused != kExitOk) return refused;
+  }
   if (args.mesh.empty() == !args.sphere_radius) {
     fmt::print(stderr, "palpa eval: give exactly one truth, --mesh MESH.off or --sphere R\n");
     return kExitBadInput;
@@ -114,6 +140,7 @@ int RunEval(const EvalArgs& args) {
     return kExitBadInput;
   }
   const double seconds_truth = Seconds(t0);
+  options.list_far_nodes = !args.far_out.empty();
   const auto t1 = std::chrono::steady_clock::now();
   std::expected<mesh::EvalResult, mesh::Error> score;
   if (candidate) {
@@ -151,6 +178,13 @@ int RunEval(const EvalArgs& args) {
   }
   const double seconds_score = Seconds(t1);
   const mesh::EvalResult& r = *score;
+  if (!args.far_out.empty()) {
+    const std::string text = FarNodesText(r, v);
+    if (auto w = io::WriteFileAtomically(args.far_out, std::as_bytes(std::span(text)), {.inputs = {args.field}}); !w) {
+      fmt::print(stderr, "palpa eval: {}\n", w.error());
+      return kExitIo;
+    }
+  }
 
   if (args.json) {
     const nlohmann::ordered_json out = {{"field", args.field},

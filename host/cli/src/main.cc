@@ -253,6 +253,9 @@ int main(int argc, char** argv) {
                                      "smaller band, e.g. a v2 field's outside band of 2)")
                         ->capture_default_str()
                         ->check(CLI::Range(0.5, 64.0));
+  eval->add_option("--far-out", ea.far_out,
+                   "Also write every far wrong-sign node (|true| > 3 voxels) as 'x y z depth kind' lines: model "
+                   "units, depth |true| in voxels, kind phantom (inside where the truth is outside) or hole");
   eval->add_option("--threads", ea.threads, "Worker threads (0: all cores)")
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
