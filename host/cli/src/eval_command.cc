@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "palpa/field/transform.h"
 #include "palpa/io/atomic_file.h"
 #include "palpa/mesh/eval.h"
 #include "palpa/mesh/field_file.h"
@@ -55,16 +56,16 @@ nlohmann::ordered_json ScoreJson(const mesh::EvalResult& r) {
 
 // --far-out's lines: each far wrong-sign node in model units (the inverse of the field's fit),
 // its |true| in voxels and its kind, phantoms first; a comment line heads them.
-std::string FarNodesText(const mesh::EvalResult& r, const blob::FieldView& v) {
+std::string FarNodesText(const mesh::EvalResult& r, const blob::FieldView& v, double far_beyond_voxels) {
   std::string text = fmt::format(
-      "# far wrong-sign nodes (|true| > 3 voxels): x y z (model units) depth (voxels) "
-      "kind; {} phantom, {} hole\n",
-      r.phantom_solid.nodes, r.holes.nodes);
-  const Eigen::Vector3d offset(v.fit_offset_m[0], v.fit_offset_m[1], v.fit_offset_m[2]);
+      "# far wrong-sign nodes (|true| > {:g} voxels): x y z (model units) depth (voxels) kind; {} phantom, {} hole\n",
+      far_beyond_voxels, r.phantom_solid.nodes, r.holes.nodes);
+  const field::Transform to_model =
+      field::Transform{v.fit_scale, Eigen::Vector3d(v.fit_offset_m[0], v.fit_offset_m[1], v.fit_offset_m[2])}.Inverse();
   for (const auto& [far, kind] : {std::pair{&r.phantom_solid, "phantom"}, std::pair{&r.holes, "hole"}})
-    for (std::size_t c = 0; c < far->at_m.size(); ++c) {
-      const Eigen::Vector3d p = (far->at_m[c] - offset) / v.fit_scale;
-      text += fmt::format("{:.9g} {:.9g} {:.9g} {:.3f} {}\n", p.x(), p.y(), p.z(), far->depths_voxels[c], kind);
+    for (const mesh::FarWrong::Node& node : far->listed) {
+      const Eigen::Vector3d p = to_model.Apply(node.at_m);
+      text += fmt::format("{:.9g} {:.9g} {:.9g} {:.3f} {}\n", p.x(), p.y(), p.z(), node.depth_voxels, kind);
     }
   return text;
 }
@@ -179,7 +180,7 @@ int RunEval(const EvalArgs& args) {
   const double seconds_score = Seconds(t1);
   const mesh::EvalResult& r = *score;
   if (!args.far_out.empty()) {
-    const std::string text = FarNodesText(r, v);
+    const std::string text = FarNodesText(r, v, options.far_beyond_voxels);
     if (auto w = io::WriteFileAtomically(args.far_out, std::as_bytes(std::span(text)), {.inputs = {args.field}}); !w) {
       fmt::print(stderr, "palpa eval: {}\n", w.error());
       return kExitIo;

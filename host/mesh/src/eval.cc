@@ -311,10 +311,7 @@ std::expected<EvalResult, Error> Score(const Phi& phi_at, const TrueDistanceGrid
     for (std::size_t c = 0; c < nodes.size(); ++c) {
       if (!(depth[c] > options.far_beyond_voxels)) continue;
       ++out.nodes;
-      if (options.list_far_nodes) {
-        out.at_m.push_back(at_m(nodes[c]));
-        out.depths_voxels.push_back(depth[c]);
-      }
+      if (options.list_far_nodes) out.listed.push_back({at_m(nodes[c]), depth[c]});
       if (depth[c] > out.deepest_voxels) {
         out.deepest_voxels = depth[c];
         out.deepest_at_m = at_m(nodes[c]);

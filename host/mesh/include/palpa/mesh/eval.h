@@ -81,7 +81,7 @@ struct EvalOptions {
   double band_voxels = 3;          ///< score nodes with |true| ≤ this (issue 5: 3 voxels)
   double gross_beyond_voxels = 1;  ///< a wrong sign is "gross" when |true| > this
   double far_beyond_voxels = 3;    ///< a wrong sign is "far" when |true| > this (issue 20)
-  bool list_far_nodes = false;     ///< fill FarWrong::at_m and depths_voxels (palpa eval --far-out)
+  bool list_far_nodes = false;     ///< fill FarWrong::listed (palpa eval --far-out)
 };
 
 /// Far wrong-sign nodes on one side of the surface: phantom solid (φ ≤ 0 where the truth is
@@ -91,10 +91,12 @@ struct FarWrong {
   std::size_t nodes = 0;                  ///< how many
   double deepest_voxels = 0;              ///< the largest |true| among them (exact), voxels; 0 if none
   Eigen::Vector3d deepest_at_m{0, 0, 0};  ///< device position of that node, m
-  /// With EvalOptions::list_far_nodes: every such node's device position (m) and |true| (voxels),
-  /// in node order (x slowest); else empty.
-  std::vector<Eigen::Vector3d> at_m;
-  std::vector<double> depths_voxels;
+  struct Node {
+    Eigen::Vector3d at_m;  ///< device position, m
+    double depth_voxels;   ///< |true| (exact), voxels
+  };
+  /// With EvalOptions::list_far_nodes: every such node, in node order (x slowest); else empty.
+  std::vector<Node> listed;
 };
 
 /// The score, in voxels (1 voxel = field.voxel_m metres). Error e = φ − true at a node.
