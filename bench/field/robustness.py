@@ -31,7 +31,7 @@ missing; `--no-poisson` skips the column.
 The last column judges palpa's row against the issue's targets (`verdict` below: Poisson, the
 clean row of the same mesh, fixed counts), and the run ends with how many rows meet them and what
 each other row missed. `--meshes bundled` runs every closed mesh in data/. A mesh that `palpa sample`
-refuses (non-manifold or inconsistently oriented: no truth to score against) is skipped and named
+refuses (missing, non-manifold or inconsistently oriented: no truth to score against) is skipped and named
 at the end, with palpa's message, instead of ending the run.
 """
 import argparse
@@ -318,8 +318,8 @@ def main():
         try:
             run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", base, "-q")
         except subprocess.CalledProcessError as e:
-            # A mesh palpa cannot sample (non-manifold, inconsistently oriented) has no truth to
-            # score against: say so and go on with the others.
+            # A mesh palpa cannot sample (missing, non-manifold, inconsistently oriented) has no
+            # truth to score against: palpa's message says why; go on with the others.
             skipped.append(f"{mesh}: {e.stderr.strip() or f'palpa sample exit {e.returncode}'}")
             continue
         pts = read_xyz(base)
@@ -376,7 +376,7 @@ def main():
     for m in missed:
         print(f"- missed: {m}")
     for m in skipped:
-        print(f"- skipped (not a closed, consistently oriented mesh): {m}")
+        print(f"- skipped (palpa sample refused it): {m}")
 
 
 if __name__ == "__main__":
