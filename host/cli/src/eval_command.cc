@@ -60,8 +60,7 @@ std::string FarNodesText(const mesh::EvalResult& r, const blob::FieldView& v, do
   std::string text = fmt::format(
       "# far wrong-sign nodes (|true| > {:g} voxels): x y z (model units) depth (voxels) kind; {} phantom, {} hole\n",
       far_beyond_voxels, r.phantom_solid.nodes, r.holes.nodes);
-  const field::Transform to_model =
-      field::Transform{v.fit_scale, Eigen::Vector3d(v.fit_offset_m[0], v.fit_offset_m[1], v.fit_offset_m[2])}.Inverse();
+  const field::Transform to_model = mesh::ModelToDevice(v).Inverse();
   for (const auto& [far, kind] : {std::pair{&r.phantom_solid, "phantom"}, std::pair{&r.holes, "hole"}})
     for (const mesh::FarWrong::Node& node : far->listed) {
       const Eigen::Vector3d p = to_model.Apply(node.at_m);

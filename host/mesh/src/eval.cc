@@ -13,6 +13,7 @@
 
 #include <fmt/core.h>
 
+#include "palpa/mesh/field_file.h"
 #include "palpa/mesh/mesh_distance.h"
 
 namespace palpa::mesh {
@@ -26,8 +27,7 @@ std::size_t NodeCount(const std::array<int, 3>& d) {
 
 // Model point → node index coordinates of the field's grid (where distances are in voxels).
 Eigen::Vector3d ToIndex(const blob::FieldView& f, const Eigen::Vector3d& model) {
-  const Eigen::Vector3d device =
-      f.fit_scale * model + Eigen::Vector3d(f.fit_offset_m[0], f.fit_offset_m[1], f.fit_offset_m[2]);
+  const Eigen::Vector3d device = ModelToDevice(f).Apply(model);
   return (device - Eigen::Vector3d(f.origin_m[0], f.origin_m[1], f.origin_m[2])) / f.voxel_m;
 }
 

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "palpa/blob/blob.h"
+#include "palpa/field/transform.h"
 #include "palpa/mesh/triangle_mesh.h"
 
 namespace palpa::mesh {
@@ -22,6 +23,12 @@ namespace palpa::mesh {
 /// through PhiQ16 and BlockQ16 below). Errors name the file, and the blob's field and byte
 /// ("f.palpa: version at byte 8: 7 is not supported ...").
 std::expected<blob::VerifiedField, Error> LoadField(const std::string& path);
+
+/// The blob's fit as the transform it was built with: device = fit_scale·model + fit_offset_m
+/// (docs/blob-format.md; `Inverse()` maps device metres back to model units).
+inline field::Transform ModelToDevice(const blob::FieldView& f) {
+  return {f.fit_scale, Eigen::Vector3d(f.fit_offset_m[0], f.fit_offset_m[1], f.fit_offset_m[2])};
+}
 
 /// Position of node (i, j, k) in device metres: origin + (i, j, k)·voxel.
 inline Eigen::Vector3d NodePosition(const blob::FieldView& f, int i, int j, int k) {
