@@ -58,7 +58,12 @@ def main():
         mesh = name if name.endswith(".off") else f"data/{name}.off"
         name = os.path.splitext(os.path.basename(mesh))[0]
         exact_path = os.path.join(args.work, f"{name}-exact-5000.xyz")
-        run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", exact_path, "-q")
+        try:
+            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", exact_path, "-q")
+        except subprocess.CalledProcessError as e:
+            # No truth to score against (missing, non-manifold, inconsistently oriented): say why, go on.
+            print(f"| {name} | skipped: {e.stderr.strip() or f'palpa sample exit {e.returncode}'} |")
+            continue
         exact = np.loadtxt(exact_path)
         bare = os.path.join(args.work, f"{name}-bare.xyz")
         np.savetxt(bare, exact[:, :3], fmt="%.9g")
