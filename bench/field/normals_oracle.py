@@ -22,23 +22,12 @@ target while `none` does not is decided by those few samples; `signs` and `lines
 error it is. Uses Debian's python3-numpy and python3-scipy (scripts/install-deps).
 """
 import argparse
-import json
 import os
-import subprocess
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-
-def run(*cmd):
-    return subprocess.run(cmd, capture_output=True, text=True, check=True)
-
-
-def score(palpa, points, mesh, cells, work, tag):
-    blob = os.path.join(work, f"{tag}.palpa")
-    run(palpa, "build", points, "-o", blob, "--cells", str(cells), "--format", "1", "-q")
-    s = json.loads(run(palpa, "eval", blob, "--mesh", mesh, "--json").stdout)["score"]
-    return s["wrong_sign_in_band_percent"], s["far_wrong"]
+from robustness import Unsampled, draw, run, score  # the same draw, build and score as the table's
 
 
 def main():
@@ -55,14 +44,10 @@ def main():
     print(f"| mesh | samples off > {args.off:g}° / wrong sign | exact normals | none | all | signs | lines | drop |")
     print("|---|---|---|---|---|---|---|---|")
     for name in args.meshes.split(","):
-        mesh = name if name.endswith(".off") else f"data/{name}.off"
-        name = os.path.splitext(os.path.basename(mesh))[0]
-        exact_path = os.path.join(args.work, f"{name}-exact-5000.xyz")
         try:
-            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", exact_path, "-q")
-        except subprocess.CalledProcessError as e:
-            # No truth to score against (missing, non-manifold, inconsistently oriented): say why, go on.
-            print(f"| {name} | skipped: {e.stderr.strip() or f'palpa sample exit {e.returncode}'} |")
+            mesh, name, exact_path = draw(args.palpa, name, args.seed, args.work)
+        except Unsampled as e:
+            print(f"| skipped: {e} |")
             continue
         exact = np.loadtxt(exact_path)
         bare = os.path.join(args.work, f"{name}-bare.xyz")
@@ -87,8 +72,8 @@ def main():
                 pts = pts[keep]
             path = os.path.join(args.work, f"{name}-{tag}.xyz")
             np.savetxt(path, pts, fmt="%.9g")
-            wrong, far = score(args.palpa, path, mesh, args.cells, args.work, f"{name}-{tag}")
-            return f"{wrong:.2f} % / {far}"
+            _, r = score(args.palpa, args.palpa, path, mesh, args.cells, args.work)
+            return f"{r['wrong']:.2f} % / {r['far']}"
 
         cells = [variant("exact", truth), variant("none", est[:, 3:])]
         given = est[:, 3:].copy()

@@ -211,6 +211,24 @@ def score_poisson(ev, blob, o3d, pts, mesh, depth, work):
             "cleaned": clean, "open": j.get("candidate_open", False)}
 
 
+class Unsampled(Exception):
+    """A mesh that `palpa sample` refuses (missing, non-manifold, inconsistently oriented): no truth
+    to score against. The message is "MESH: palpa's message"."""
+
+
+def draw(palpa, name, seed, work):
+    """`palpa sample -n 5000 --seed SEED` of a bundled mesh name (data/NAME.off) or an .off path, into
+    WORK/NAME-5000.xyz: (mesh path, name, points path). Raises Unsampled."""
+    mesh = name if name.endswith(".off") else f"data/{name}.off"
+    name = os.path.splitext(os.path.basename(mesh))[0]
+    base = os.path.join(work, f"{name}-5000.xyz")
+    try:
+        run(palpa, "sample", mesh, "-n", "5000", "--seed", str(seed), "-o", base, "-q")
+    except subprocess.CalledProcessError as e:
+        raise Unsampled(f"{mesh}: {e.stderr.strip() or f'palpa sample exit {e.returncode}'}") from None
+    return mesh, name, base
+
+
 def score(palpa, ev, points, mesh, cells, work):
     """Builds with `palpa`, scores with `ev` (a palpa with far wrong-sign figures)."""
     blob = os.path.join(work, "field.palpa")
@@ -312,15 +330,10 @@ def main():
         meshes = sorted(os.path.splitext(f)[0] for f in os.listdir("data") if f.endswith(".off"))
     judged, missed, skipped = 0, [], []
     for name in meshes:
-        mesh = name if name.endswith(".off") else f"data/{name}.off"
-        name = os.path.splitext(os.path.basename(mesh))[0]
-        base = os.path.join(args.work, f"{name}-5000.xyz")
         try:
-            run(args.palpa, "sample", mesh, "-n", "5000", "--seed", str(args.seed), "-o", base, "-q")
-        except subprocess.CalledProcessError as e:
-            # A mesh palpa cannot sample (missing, non-manifold, inconsistently oriented) has no
-            # truth to score against: palpa's message says why; go on with the others.
-            skipped.append(f"{mesh}: {e.stderr.strip() or f'palpa sample exit {e.returncode}'}")
+            mesh, name, base = draw(args.palpa, name, args.seed, args.work)
+        except Unsampled as e:  # palpa's message says why; go on with the others
+            skipped.append(str(e))
             continue
         pts = read_xyz(base)
         # The voxel in model units: the fit maps the longest side to --fit metres over `cells` nodes.
