@@ -1014,6 +1014,30 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
     }
     return w;
   };
+  // Both of sample k's probes in one pass over the sheet (each sum as sheet_term's, term by term
+  // in the same order), and whether k is one of the sheet's own samples.
+  struct BothTerms {
+    double in = 0, out = 0;
+    bool own = false;
+  };
+  const auto sheet_terms = [&](const Sheet& sheet, std::size_t k) {
+    const V3 q_in = positions[k] - offsets[k] * normals[k];
+    const V3 q_out = positions[k] + offsets[k] * normals[k];
+    BothTerms t;
+    for (const std::uint32_t j : sheet.samples) {
+      const double s = side[j];
+      if (j == k) {
+        const double own = SampleProbes::OwnDisc(areas[j], offsets[j]);
+        t.in += s * own;
+        t.out += s * -own;
+        t.own = true;
+        continue;
+      }
+      t.in += s * SmoothedDipole(positions[j], areas[j], normals[j], q_in);
+      t.out += s * SmoothedDipole(positions[j], areas[j], normals[j], q_out);
+    }
+    return t;
+  };
   std::size_t flipped = 0;
   std::vector<std::uint8_t> done(candidates.size(), 0);
   // A sheet's gain depends only on the probes within its reach and on its own samples' sides, so
@@ -1056,9 +1080,8 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
           terms.clear();
           for (const auto& [k, unused] : near) {
             if (!(offsets[k] > 0)) continue;
-            const bool own = std::find(sheet.samples.begin(), sheet.samples.end(), k) != sheet.samples.end();
-            terms.push_back(
-                ProbeTerm{static_cast<std::uint32_t>(k), own, sheet_term(sheet, k, true), sheet_term(sheet, k, false)});
+            const BothTerms t = sheet_terms(sheet, k);
+            terms.push_back(ProbeTerm{static_cast<std::uint32_t>(k), t.own, t.in, t.out});
           }
         }
         double delta = 0;
