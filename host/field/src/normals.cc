@@ -994,28 +994,16 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
     }
   });
   for (std::size_t i = 0; i < n; ++i) cache.smoothed[i] = cache.smoothed[i] | smooth_now[i];
-  std::vector<double> inside = cache.inside, outside = cache.outside;
+  // Changed only by a flip, after which the cache is measured afresh.
+  std::vector<double>& inside = cache.inside;
+  std::vector<double>& outside = cache.outside;
   // side[i]: the sample's sign against the normals measured (+1 kept, -1 flipped); the probes stay
   // where they are. Energy: sum_i a_i ((w_in - t_in)^2 + (w_out - t_out)^2), the targets 1 inside
   // and 0 outside the sample's current sign. A sheet's flip adds -2 w_Q at every probe, w_Q the
   // sheet's own dipoles (the disc for a sample's own probes).
   std::vector<std::int8_t> side(n, 1);
-  const auto sheet_term = [&](const Sheet& sheet, std::size_t k, bool at_inside) {
-    const V3 q = at_inside ? V3(positions[k] - offsets[k] * normals[k]) : V3(positions[k] + offsets[k] * normals[k]);
-    double w = 0;
-    for (const std::uint32_t j : sheet.samples) {
-      const double s = side[j];
-      if (j == k) {
-        const double own = SampleProbes::OwnDisc(areas[j], offsets[j]);
-        w += s * (at_inside ? own : -own);
-        continue;
-      }
-      w += s * SmoothedDipole(positions[j], areas[j], normals[j], q);
-    }
-    return w;
-  };
-  // Both of sample k's probes in one pass over the sheet (each sum as sheet_term's, term by term
-  // in the same order), and whether k is one of the sheet's own samples.
+  // w_Q at both of sample k's probes, in one pass over the sheet, and whether k is one of the
+  // sheet's own samples.
   struct BothTerms {
     double in = 0, out = 0;
     bool own = false;
@@ -1120,13 +1108,12 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
       const Sheet& sheet = candidates[c];
       std::vector<std::pair<std::size_t, double>> near;
       tree.radiusSearch(sheet.centre.data(), sheet.reach * sheet.reach, near, nanoflann::SearchParams(32, 0, false));
-      std::vector<std::pair<double, double>> terms(near.size());
+      std::vector<BothTerms> terms(near.size());
       for (std::size_t m = 0; m < near.size(); ++m)
-        if (offsets[near[m].first] > 0)
-          terms[m] = {sheet_term(sheet, near[m].first, true), sheet_term(sheet, near[m].first, false)};
+        if (offsets[near[m].first] > 0) terms[m] = sheet_terms(sheet, near[m].first);
       for (std::size_t m = 0; m < near.size(); ++m) {
-        inside[near[m].first] -= 2.0 * terms[m].first;
-        outside[near[m].first] -= 2.0 * terms[m].second;
+        inside[near[m].first] -= 2.0 * terms[m].in;
+        outside[near[m].first] -= 2.0 * terms[m].out;
       }
       for (const std::uint32_t j : sheet.samples) side[j] = static_cast<std::int8_t>(-side[j]);
       done[c] = 1;
