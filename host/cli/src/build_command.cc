@@ -133,7 +133,8 @@ int RunBuild(const BuildArgs& args) {
   field::NormalsReport normals_report;
   if (normals_mode == field::NormalsMode::kEstimate) {
     // A dense scan is thinned by position first (SimplifyBarePositions: half a voxel, or 1.5
-    // where a noisy scan's shell is too thick for half-voxel cells to halve it).
+    // where a noisy scan's shell is too thick for half-voxel cells to halve it, one sample per
+    // layer of a cell that holds both sides of a thin wall).
     if (provisional_voxel > 0) {
       const std::size_t before = points->positions.size();
       const field::Simplification thinned = field::SimplifyBarePositions(*points, provisional_voxel);

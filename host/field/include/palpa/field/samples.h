@@ -130,8 +130,15 @@ inline constexpr double kDenseCellVoxels = 1.5;
 /// cell) and cells of half `voxel`; where those do not halve the count (a noisy scan spreads over
 /// a shell too thick: knot1, 2,000,000 samples with 1 voxel of noise, whose jet fits then followed
 /// the noise, 48 % of the band wrong), cells of kDenseCellVoxels voxels, whose averages also
-/// shrink the noise. The normals are placeholders afterwards, applied or not (estimate them);
-/// `cell` of the result is the side tried last. `voxel` in the units of the positions, > 0.
+/// shrink the noise. A wide cell whose samples fall in two layers along the normal of the cells
+/// around it (PCA over 3 x 3 x 3 cells), split by a gap wider than 0.3 voxels, than twice each
+/// layer's own spread (2 samples a layer or more) and than 4 times the set's noise (the median
+/// RMS offset within the layers of those neighbourhoods), keeps one sample per layer: the two
+/// sides of a wall thinner than the cell stay apart (CGAL's rotor, 200,000 bare samples at 150
+/// cells: 44.5 % of the band wrong when its fins were averaged mid-wall, 0.56 % with the layers),
+/// and a noisy shell, with no clean gap, is averaged as before. The normals are placeholders (+z)
+/// afterwards, applied or not (estimate them); `cell` of the result is the side tried last.
+/// `voxel` in the units of the positions, > 0. Deterministic.
 Simplification SimplifyBarePositions(PointSet& points, double voxel);
 
 /// SmoothNoisyPositions' move: its neighbourhoods (the nearest 16, 32 or 64) and default passes.
