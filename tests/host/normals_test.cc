@@ -1075,6 +1075,9 @@ TEST(SimplifyBarePositions, TheTwoSidesOfAWallThinnerThanTheWideCellsStayApart) 
   }
   EXPECT_EQ(low, cells_low.size());
   EXPECT_EQ(high, cells_high.size());
+  std::size_t both = 0;  // the cells holding both planes (one cell deep in z)
+  for (const auto& c : cells_low) both += cells_high.count(c);
+  EXPECT_EQ(s.layered_cells, both);
   EXPECT_GT(low, 150u);  // of 14 x 14
 
   // A plane with Gaussian noise of half a voxel: no gap in it is a second side.
@@ -1088,6 +1091,7 @@ TEST(SimplifyBarePositions, TheTwoSidesOfAWallThinnerThanTheWideCellsStayApart) 
   ASSERT_TRUE(layered.Applied());
   EXPECT_EQ(layered.cell, kDenseCellVoxels);
   EXPECT_EQ(layered.after, whole.after);
+  EXPECT_EQ(layered.layered_cells, 0u);
   EXPECT_EQ(noisy.positions, merged.positions);
 }
 

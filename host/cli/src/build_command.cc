@@ -140,11 +140,15 @@ int RunBuild(const BuildArgs& args) {
       const field::Simplification thinned = field::SimplifyBarePositions(*points, provisional_voxel);
       const double voxels = thinned.cell / provisional_voxel;
       if (thinned.Applied() && !args.quiet)
-        fmt::print(stderr,
-                   "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position) before their normals "
-                   "were estimated\n",
-                   args.points, before, points->positions.size(),
-                   voxels == 0.5 ? "half a" : fmt::format("{:g}", voxels), voxels == 0.5 ? "" : "s");
+        fmt::print(
+            stderr,
+            "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position{}) before their normals "
+            "were estimated\n",
+            args.points, before, points->positions.size(), voxels == 0.5 ? "half a" : fmt::format("{:g}", voxels),
+            voxels == 0.5 ? "" : "s",
+            thinned.layered_cells == 0
+                ? ""
+                : fmt::format("; one sample per side of a wall thinner than that in {} cells", thinned.layered_cells));
     }
     normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
     normals_report.estimated = points->positions.size();

@@ -105,6 +105,8 @@ struct Simplification {
   std::size_t before = 0;
   std::size_t after = 0;  ///< == before when the set was left as it was
   double cell = 0;        ///< cell side, units of the positions
+  /// SimplifyBarePositions' wide cells that kept one sample per layer (a thin wall's two sides)
+  std::size_t layered_cells = 0;
   bool Applied() const { return after < before; }
 };
 
