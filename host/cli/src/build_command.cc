@@ -133,8 +133,8 @@ int RunBuild(const BuildArgs& args) {
   field::NormalsReport normals_report;
   if (normals_mode == field::NormalsMode::kEstimate) {
     // A dense scan is thinned by position first (SimplifyBarePositions: half a voxel, or 1.5
-    // where a noisy scan's shell is too thick for half-voxel cells to halve it, one sample per
-    // layer of a cell that holds both sides of a thin wall).
+    // where a noisy scan's shell is too thick for half-voxel cells to halve it, but not in a cell
+    // that holds both sides of a thin wall).
     if (provisional_voxel > 0) {
       const std::size_t before = points->positions.size();
       const field::Simplification thinned = field::SimplifyBarePositions(*points, provisional_voxel);
@@ -146,9 +146,10 @@ int RunBuild(const BuildArgs& args) {
             "were estimated\n",
             args.points, before, points->positions.size(), voxels == 0.5 ? "half a" : fmt::format("{:g}", voxels),
             voxels == 0.5 ? "" : "s",
-            thinned.layered_cells == 0
+            thinned.wall_cells == 0
                 ? ""
-                : fmt::format("; one sample per side of a wall thinner than that in {} cells", thinned.layered_cells));
+                : fmt::format("; the {} cells that hold both sides of a wall thinner than that keep every sample",
+                              thinned.wall_cells));
     }
     normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
     normals_report.estimated = points->positions.size();

@@ -160,23 +160,22 @@ constexpr double kLayerGapNoises = 4.0;
 constexpr std::size_t kLeastLayerSamples = 2;
 constexpr double kLayerGapSpreads = 2.0;
 
-// For SimplifyBarePositions' wide cells: 1 for the samples of a cell's upper layer, where its
-// samples fall in two layers along the normal of the 3 x 3 x 3 cells around it, split at their
-// widest gap (the rules: samples.h, docs/field-methods.md § Bare dense sets). The normal is PCA's
-// least axis, taken again about each layer's own mean where the neighbourhood has two layers
-// (layers whose tangential means differ tilt the axis of the whole). The flatness test keeps a
-// single sheet that the axis tilts next to an edge whole: its offsets spread evenly (CGAL's
-// anchor, 60,000 samples at 100 cells: 0.66 -> 0.84 % of the band wrong without it). Deterministic.
-// The flags, and how many cells split.
-struct Layers {
-  std::vector<std::uint8_t> upper;
+// For SimplifyBarePositions' wide cells: the cells whose samples fall in two layers along the
+// normal of the 3 x 3 x 3 cells around it, split at their widest gap (the rules: samples.h,
+// docs/field-methods.md § Bare dense sets). The normal is PCA's least axis, taken again about each
+// layer's own mean where the neighbourhood has two layers (layers whose tangential means differ
+// tilt the axis of the whole). The flatness test keeps a single sheet that the axis tilts next to
+// an edge out: its offsets spread evenly (CGAL's anchor, 60,000 samples at 100 cells: 0.66 -> 0.84 %
+// of the band wrong when such cells were split). Deterministic.
+struct WallCells {
+  std::vector<std::uint8_t> in_wall;  // per sample: its cell holds both sides
   std::size_t cells = 0;
 };
 
-Layers UpperLayers(const std::vector<Eigen::Vector3d>& positions, const CellOrder& sorted, double cell) {
+WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const CellOrder& sorted, double cell) {
   const std::size_t n = positions.size();
-  Layers out;
-  out.upper.assign(n, 0);
+  WallCells out;
+  out.in_wall.assign(n, 0);
   std::vector<std::size_t> start;  // first rank of each cell, then n
   for (std::size_t r = 0; r < n; ++r)
     if (r == 0 || sorted.key[sorted.order[r]] != sorted.key[sorted.order[r - 1]]) start.push_back(r);
@@ -327,7 +326,7 @@ Layers UpperLayers(const std::vector<Eigen::Vector3d>& positions, const CellOrde
     const bool parts_neighbourhood = s.low <= s.high && s.high - s.low > least_gap &&
                                      offsets[c][s.at - 1].first < s.high && offsets[c][s.at].first > s.low;
     if (!two_flat_layers(s, offsets[c]) && !parts_neighbourhood) continue;
-    for (std::size_t j = split[c].at; j < offsets[c].size(); ++j) out.upper[offsets[c][j].second] = 1;
+    for (const auto& [offset, i] : offsets[c]) out.in_wall[i] = 1;
     ++out.cells;
   }
   return out;
@@ -472,17 +471,34 @@ Simplification SimplifyBarePositions(PointSet& points, double voxel) {
   points.normals.assign(points.positions.size(), Eigen::Vector3d::UnitZ());
   const Simplification half = SimplifyDenseSamples(points, 0.5 * voxel);
   if (half.Applied() || points.positions.size() < 2 || !(voxel > 0)) return half;
-  // Wide cells: a cell's two layers become two groups (normals +z and -z), then placeholders again.
   const double wide = kDenseCellVoxels * voxel;
   const CellOrder sorted = SortIntoCells(points.positions, wide);
   if (2 * OccupiedCells(sorted) > points.positions.size())
     return Simplification{half.before, half.after, wide};  // as it was
-  const Layers layers = UpperLayers(points.positions, sorted, wide);
-  for (std::size_t i = 0; i < layers.upper.size(); ++i)
-    if (layers.upper[i]) points.normals[i] = -Eigen::Vector3d::UnitZ();
-  Simplification out = SimplifyDenseSamples(points, wide);
-  out.layered_cells = layers.cells;
-  points.normals.assign(points.positions.size(), Eigen::Vector3d::UnitZ());
+  // A cell holding a wall's two sides keeps every sample as it is: averaged, even per side, its
+  // samples would be spaced as the wall is thick, and the orientation's nearest neighbours would
+  // cross it. The rest are averaged per cell.
+  const WallCells walls = ThinWallCells(points.positions, sorted, wide);
+  PointSet wall;
+  if (walls.cells > 0) {
+    const bool lines = points.lines.size() == points.positions.size();
+    wall.has_normals = points.has_normals;
+    std::vector<std::uint8_t> drop(points.positions.size(), 0);
+    for (std::size_t i = 0; i < points.positions.size(); ++i) {
+      if (!walls.in_wall[i]) continue;
+      wall.positions.push_back(points.positions[i]);
+      wall.normals.push_back(points.normals[i]);
+      if (lines) wall.lines.push_back(points.lines[i]);
+      drop[i] = 1;
+    }
+    Compact(points, drop);
+  }
+  SimplifyDenseSamples(points, wide);
+  points.positions.insert(points.positions.end(), wall.positions.begin(), wall.positions.end());
+  points.normals.insert(points.normals.end(), wall.normals.begin(), wall.normals.end());
+  points.lines.insert(points.lines.end(), wall.lines.begin(), wall.lines.end());
+  Simplification out{half.before, points.positions.size(), wide};
+  out.wall_cells = walls.cells;
   return out;
 }
 
