@@ -115,11 +115,14 @@ constexpr double kSparseSpacings = 3.0;   // 16th neighbour (~1.4 s on a surface
 constexpr double kMaxLocalSpacing = 2.0;  // x the global: outliers among outliers are not a sparse region
 
 // A sample's cube cell (z, y, x) relative to the lowest corner of the set; with the samples in
-// order of cell, then index.
+// order of cell, then index, and where each occupied cell's run of that order starts.
 using CellKey = std::array<std::int64_t, 3>;
 struct CellOrder {
   std::vector<CellKey> key;  // per sample
   std::vector<std::size_t> order;
+  std::vector<std::size_t> start;  // per occupied cell, then order.size()
+  std::size_t Cells() const { return start.size() - 1; }
+  const CellKey& KeyOf(std::size_t c) const { return key[order[start[c]]]; }
 };
 
 CellOrder SortIntoCells(const std::vector<Eigen::Vector3d>& positions, double cell) {
@@ -139,15 +142,10 @@ CellOrder SortIntoCells(const std::vector<Eigen::Vector3d>& positions, double ce
   std::iota(out.order.begin(), out.order.end(), std::size_t{0});
   std::sort(out.order.begin(), out.order.end(),
             [&](std::size_t a, std::size_t b) { return out.key[a] != out.key[b] ? out.key[a] < out.key[b] : a < b; });
+  for (std::size_t r = 0; r < n; ++r)
+    if (r == 0 || out.key[out.order[r]] != out.key[out.order[r - 1]]) out.start.push_back(r);
+  out.start.push_back(n);
   return out;
-}
-
-// How many cells hold samples.
-std::size_t OccupiedCells(const CellOrder& sorted) {
-  std::size_t cells = sorted.order.empty() ? 0 : 1;
-  for (std::size_t r = 1; r < sorted.order.size(); ++r)
-    cells += sorted.key[sorted.order[r]] != sorted.key[sorted.order[r - 1]] ? 1u : 0u;
-  return cells;
 }
 
 // The smallest gap, in units of the cell, that splits a cell's samples into two layers, whatever
@@ -176,21 +174,13 @@ WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const Cel
   const std::size_t n = positions.size();
   WallCells out;
   out.in_wall.assign(n, 0);
-  std::vector<std::size_t> start;  // first rank of each cell, then n
-  for (std::size_t r = 0; r < n; ++r)
-    if (r == 0 || sorted.key[sorted.order[r]] != sorted.key[sorted.order[r - 1]]) start.push_back(r);
-  const std::size_t cells = start.size();
-  start.push_back(n);
+  const std::vector<std::size_t>& start = sorted.start;
+  const std::size_t cells = sorted.Cells();
   const auto cell_of = [&](const CellKey& k) -> std::size_t {  // cells when empty
-    std::size_t lo = 0, hi = cells;
-    while (lo < hi) {
-      const std::size_t mid = (lo + hi) / 2;
-      if (sorted.key[sorted.order[start[mid]]] < k)
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
-    return lo < cells && sorted.key[sorted.order[start[lo]]] == k ? lo : cells;
+    const auto at = std::lower_bound(start.begin(), start.end() - 1, k,
+                                     [&](std::size_t r, const CellKey& x) { return sorted.key[sorted.order[r]] < x; });
+    const auto c = static_cast<std::size_t>(at - start.begin());
+    return c < cells && sorted.KeyOf(c) == k ? c : cells;
   };
   struct Split {
     std::size_t at = 0;  // the cell's sorted offsets [0, at) lie below its widest gap
@@ -221,7 +211,7 @@ WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const Cel
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       const std::size_t count = start[c + 1] - start[c];
       if (count < 2) continue;
-      const CellKey& k = sorted.key[sorted.order[start[c]]];
+      const CellKey& k = sorted.KeyOf(c);
       around.clear();
       for (std::int64_t dz = -1; dz <= 1; ++dz)
         for (std::int64_t dy = -1; dy <= 1; ++dy)
@@ -422,9 +412,8 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
   Simplification out{n, n, cell};
   if (n < 2 || !(cell > 0)) return out;
   const CellOrder sorted = SortIntoCells(points.positions, cell);
-  const std::vector<CellKey>& key = sorted.key;
   const std::vector<std::size_t>& order = sorted.order;
-  const std::size_t cells = OccupiedCells(sorted);
+  const std::size_t cells = sorted.Cells();
   if (2 * cells > n) return out;  // not denser than the grid: leave the set as it was
 
   const bool lines = points.lines.size() == n;
@@ -437,11 +426,9 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
     std::size_t count, first;
   };
   std::vector<Group> groups;
-  for (std::size_t begin = 0; begin < n;) {
-    std::size_t end = begin + 1;
-    while (end < n && key[order[end]] == key[order[begin]]) ++end;
+  for (std::size_t c = 0; c < cells; ++c) {
     groups.clear();
-    for (std::size_t r = begin; r < end; ++r) {
+    for (std::size_t r = sorted.start[c]; r < sorted.start[c + 1]; ++r) {
       const std::size_t i = order[r];
       const Eigen::Vector3d& nrm = points.normals[i];
       auto g =
@@ -460,7 +447,6 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
       merged.normals.push_back(length > 0 ? Eigen::Vector3d(g.normal_sum / length) : g.first_normal);
       if (lines) merged.lines.push_back(points.lines[g.first]);
     }
-    begin = end;
   }
   out.after = merged.positions.size();
   points = std::move(merged);
@@ -473,8 +459,7 @@ Simplification SimplifyBarePositions(PointSet& points, double voxel) {
   if (half.Applied() || points.positions.size() < 2 || !(voxel > 0)) return half;
   const double wide = kDenseCellVoxels * voxel;
   const CellOrder sorted = SortIntoCells(points.positions, wide);
-  if (2 * OccupiedCells(sorted) > points.positions.size())
-    return Simplification{half.before, half.after, wide};  // as it was
+  if (2 * sorted.Cells() > points.positions.size()) return Simplification{half.before, half.after, wide};  // as it was
   // A cell holding a wall's two sides keeps every sample as it is: averaged, even per side, its
   // samples would be spaced as the wall is thick, and the orientation's nearest neighbours would
   // cross it. The rest are averaged per cell.
