@@ -134,7 +134,7 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode == field::NormalsMode::kEstimate) {
     // A dense scan is thinned by position first (SimplifyBarePositions: half a voxel, or 1.5
     // where a noisy scan's shell is too thick for half-voxel cells to halve it, but not in a cell
-    // that holds both sides of a thin wall).
+    // that holds both sides of a thin wall, and in half-voxel cells where one wraps round a rim).
     if (provisional_voxel > 0) {
       const std::size_t before = points->positions.size();
       const field::Simplification thinned = field::SimplifyBarePositions(*points, provisional_voxel);
@@ -142,14 +142,18 @@ int RunBuild(const BuildArgs& args) {
       if (thinned.Applied() && !args.quiet)
         fmt::print(
             stderr,
-            "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position{}) before their normals "
+            "palpa build: note: {}: {} samples thinned to {} ({} voxel{}, by position{}{}) before their normals "
             "were estimated\n",
             args.points, before, points->positions.size(), voxels == 0.5 ? "half a" : fmt::format("{:g}", voxels),
             voxels == 0.5 ? "" : "s",
             thinned.wall_cells == 0
                 ? ""
                 : fmt::format("; the {} cells that hold both sides of a wall thinner than that keep every sample",
-                              thinned.wall_cells));
+                              thinned.wall_cells),
+            thinned.fold_cells == 0
+                ? ""
+                : fmt::format("; the {} that wrap round a thin part's rim are thinned to half a voxel",
+                              thinned.fold_cells));
     }
     normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
     normals_report.estimated = points->positions.size();

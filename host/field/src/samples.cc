@@ -168,6 +168,7 @@ constexpr double kLayerGapSpreads = 2.0;
 struct WallCells {
   std::vector<std::uint8_t> in_wall;  // per sample: its cell holds both sides
   std::size_t cells = 0;
+  double noise = 0;  // the median RMS within the neighbourhoods' layers, units of the positions
 };
 
 WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const CellOrder& sorted, double cell) {
@@ -307,6 +308,7 @@ WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const Cel
     std::nth_element(rms.begin(), rms.begin() + static_cast<std::ptrdiff_t>(rms.size() / 2), rms.end());
     noise = rms[rms.size() / 2];
   }
+  out.noise = noise;
   const double least_gap = std::max(kLeastLayerGapCells * cell, kLayerGapNoises * noise);
   for (std::size_t c = 0; c < cells; ++c) {
     const Split& s = split[c];
@@ -407,29 +409,23 @@ void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices) {
   Compact(points, drop);
 }
 
-Simplification SimplifyDenseSamples(PointSet& points, double cell) {
-  const std::size_t n = points.positions.size();
-  Simplification out{n, n, cell};
-  if (n < 2 || !(cell > 0)) return out;
-  const CellOrder sorted = SortIntoCells(points.positions, cell);
-  const std::vector<std::size_t>& order = sorted.order;
-  const std::size_t cells = sorted.Cells();
-  if (2 * cells > n) return out;  // not denser than the grid: leave the set as it was
+namespace {
 
-  const bool lines = points.lines.size() == n;
-  PointSet merged;
-  merged.has_normals = points.has_normals;
-  merged.positions.reserve(cells);
-  merged.normals.reserve(cells);
+// One sample per occupied cell of `sorted` and normal group (SimplifyDenseSamples' rule), over the
+// samples i with take(i), appended to `out` in order of cell.
+template <class Take>
+void AppendCellMeans(const PointSet& points, const CellOrder& sorted, Take take, PointSet& out) {
+  const bool lines = points.lines.size() == points.positions.size();
   struct Group {
     Eigen::Vector3d first_normal, position_sum, normal_sum;
     std::size_t count, first;
   };
   std::vector<Group> groups;
-  for (std::size_t c = 0; c < cells; ++c) {
+  for (std::size_t c = 0; c < sorted.Cells(); ++c) {
     groups.clear();
     for (std::size_t r = sorted.start[c]; r < sorted.start[c + 1]; ++r) {
-      const std::size_t i = order[r];
+      const std::size_t i = sorted.order[r];
+      if (!take(i)) continue;
       const Eigen::Vector3d& nrm = points.normals[i];
       auto g =
           std::find_if(groups.begin(), groups.end(), [&](const Group& x) { return x.first_normal.dot(nrm) >= 0.7; });
@@ -442,12 +438,62 @@ Simplification SimplifyDenseSamples(PointSet& points, double cell) {
       ++g->count;
     }
     for (const Group& g : groups) {
-      merged.positions.push_back(g.position_sum / static_cast<double>(g.count));
+      out.positions.push_back(g.position_sum / static_cast<double>(g.count));
       const double length = g.normal_sum.norm();
-      merged.normals.push_back(length > 0 ? Eigen::Vector3d(g.normal_sum / length) : g.first_normal);
-      if (lines) merged.lines.push_back(points.lines[g.first]);
+      out.normals.push_back(length > 0 ? Eigen::Vector3d(g.normal_sum / length) : g.first_normal);
+      if (lines) out.lines.push_back(points.lines[g.first]);
     }
   }
+}
+
+// A wide cell's samples lie this far off their own least-squares plane (RMS, units of the cell)
+// or farther where they wrap round a thin part's rim: two creases in one cell, whose mean lies
+// inside the part. One 90-degree crease through a cell's middle gives 0.10 (0.204 of an arm),
+// a gently curved sheet less.
+constexpr double kFoldCells = 0.15;
+// ... and this many times the set's noise (ThinWallCells'), so that a noisy shell has none.
+constexpr double kFoldNoises = 3.0;
+constexpr std::size_t kLeastFoldSamples = 3;
+
+// Per cell of `sorted`: whether its samples wrap round a rim (kFoldCells); wall cells never do.
+std::vector<std::uint8_t> FoldedCells(const std::vector<Eigen::Vector3d>& positions, const CellOrder& sorted,
+                                      double cell, const WallCells& walls) {
+  std::vector<std::uint8_t> folded(sorted.Cells(), 0);
+  const double least_rms = std::max(kFoldCells * cell, kFoldNoises * walls.noise);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted.Cells(), 1024), [&](const auto& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) {
+      const std::size_t b = sorted.start[c], e = sorted.start[c + 1];
+      if (e - b < kLeastFoldSamples || walls.in_wall[sorted.order[b]]) continue;
+      const Eigen::Vector3d origin = positions[sorted.order[b]];  // precision, as in ThinWallCells
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (std::size_t r = b; r < e; ++r) mean += positions[sorted.order[r]] - origin;
+      mean /= static_cast<double>(e - b);
+      Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+      for (std::size_t r = b; r < e; ++r) {
+        const Eigen::Vector3d d = positions[sorted.order[r]] - origin - mean;
+        scatter += d * d.transpose();
+      }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> least(scatter, Eigen::EigenvaluesOnly);
+      folded[c] = std::sqrt(std::max(0.0, least.eigenvalues()[0]) / static_cast<double>(e - b)) > least_rms ? 1 : 0;
+    }
+  });
+  return folded;
+}
+
+}  // namespace
+
+Simplification SimplifyDenseSamples(PointSet& points, double cell) {
+  const std::size_t n = points.positions.size();
+  Simplification out{n, n, cell};
+  if (n < 2 || !(cell > 0)) return out;
+  const CellOrder sorted = SortIntoCells(points.positions, cell);
+  if (2 * sorted.Cells() > n) return out;  // not denser than the grid: leave the set as it was
+  PointSet merged;
+  merged.has_normals = points.has_normals;
+  merged.positions.reserve(sorted.Cells());
+  merged.normals.reserve(sorted.Cells());
+  AppendCellMeans(
+      points, sorted, [](std::size_t) { return true; }, merged);
   out.after = merged.positions.size();
   points = std::move(merged);
   return out;
@@ -462,28 +508,44 @@ Simplification SimplifyBarePositions(PointSet& points, double voxel) {
   if (2 * sorted.Cells() > points.positions.size()) return Simplification{half.before, half.after, wide};  // as it was
   // A cell holding a wall's two sides keeps every sample as it is: averaged, even per side, its
   // samples would be spaced as the wall is thick, and the orientation's nearest neighbours would
-  // cross it. The rest are averaged per cell.
+  // cross it. A cell wrapping round a rim is averaged in half-voxel cells: its one mean would lie
+  // inside the part and bridge its sides. The rest are averaged per cell.
   const WallCells walls = ThinWallCells(points.positions, sorted, wide);
-  PointSet wall;
-  if (walls.cells > 0) {
-    const bool lines = points.lines.size() == points.positions.size();
-    wall.has_normals = points.has_normals;
-    std::vector<std::uint8_t> drop(points.positions.size(), 0);
-    for (std::size_t i = 0; i < points.positions.size(); ++i) {
-      if (!walls.in_wall[i]) continue;
-      wall.positions.push_back(points.positions[i]);
-      wall.normals.push_back(points.normals[i]);
-      if (lines) wall.lines.push_back(points.lines[i]);
-      drop[i] = 1;
-    }
-    Compact(points, drop);
+  const std::vector<std::uint8_t> folded = FoldedCells(points.positions, sorted, wide, walls);
+  std::vector<std::uint8_t> in_fold(points.positions.size(), 0);
+  std::size_t folds = 0;
+  for (std::size_t c = 0; c < sorted.Cells(); ++c) {
+    if (!folded[c]) continue;
+    ++folds;
+    for (std::size_t r = sorted.start[c]; r < sorted.start[c + 1]; ++r) in_fold[sorted.order[r]] = 1;
   }
-  SimplifyDenseSamples(points, wide);
-  points.positions.insert(points.positions.end(), wall.positions.begin(), wall.positions.end());
-  points.normals.insert(points.normals.end(), wall.normals.begin(), wall.normals.end());
-  points.lines.insert(points.lines.end(), wall.lines.begin(), wall.lines.end());
+  PointSet thinned;
+  thinned.has_normals = points.has_normals;
+  AppendCellMeans(
+      points, sorted, [&](std::size_t i) { return !walls.in_wall[i] && !in_fold[i]; }, thinned);
+  if (folds > 0) {
+    PointSet fold;
+    const bool fold_lines = points.lines.size() == points.positions.size();
+    for (std::size_t i = 0; i < points.positions.size(); ++i) {
+      if (!in_fold[i]) continue;
+      fold.positions.push_back(points.positions[i]);
+      fold.normals.push_back(points.normals[i]);
+      if (fold_lines) fold.lines.push_back(points.lines[i]);
+    }
+    AppendCellMeans(
+        fold, SortIntoCells(fold.positions, 0.5 * voxel), [](std::size_t) { return true; }, thinned);
+  }
+  const bool lines = points.lines.size() == points.positions.size();
+  for (std::size_t i = 0; i < points.positions.size(); ++i) {
+    if (!walls.in_wall[i]) continue;
+    thinned.positions.push_back(points.positions[i]);
+    thinned.normals.push_back(points.normals[i]);
+    if (lines) thinned.lines.push_back(points.lines[i]);
+  }
+  points = std::move(thinned);
   Simplification out{half.before, points.positions.size(), wide};
   out.wall_cells = walls.cells;
+  out.fold_cells = folds;
   return out;
 }
 
