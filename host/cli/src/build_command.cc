@@ -155,7 +155,8 @@ int RunBuild(const BuildArgs& args) {
                 : fmt::format("; the {} that wrap round a thin part's rim are thinned to half a voxel",
                               thinned.fold_cells));
     }
-    normals_report.neighbours = field::EstimateNormalLines(points->positions, points->normals);  // signs below
+    normals_report.neighbours =
+        field::EstimateNormalLines(points->positions, points->normals, &normals_report.noise_figure);  // signs below
     normals_report.estimated = points->positions.size();
   }
   const field::DroppedSamples dropped = field::DropDegenerateSamples(*points, args.points);

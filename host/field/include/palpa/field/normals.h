@@ -48,6 +48,7 @@ struct NormalsReport {
   std::size_t components = 0;                ///< connected pieces of the neighbour graph
   std::size_t open_components = 0;           ///< of which open (sign from the majority or the divergence sum)
   int neighbours = 0;                        ///< of the jet fit (EstimateNormalLines' result), when estimated
+  double noise_figure = -1;                  ///< EstimateNormalLines' median noise over spacing, when measured
   std::size_t inverted_parts = 0;            ///< parts of closed pieces turned outward (FlipInvertedParts)
   std::size_t inverted_samples = 0;          ///< their samples
   std::size_t open_level_flipped = 0;        ///< estimate: open pieces whose sign the winding level reversed
@@ -96,9 +97,12 @@ inline constexpr int kMostNormalNeighbours = 96;
 /// sides of parts a few spacings thick and blend the facets of low-polygon meshes (10 CGAL meshes
 /// never tuned on, exact samples, normals stripped: wrong sign in the band 1.18-5.54x that with
 /// exact normals with 18, 1.18-2.27x with 10; bench/field/robustness.py --seed 2). Returns the
-/// neighbour count of the normals given. Positions in any units, finite; at least 4 of them (else
-/// normals are (0, 0, 1)). Parallel, deterministic.
-int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals);
+/// neighbour count of the normals given; `noise_figure`, when given, receives the median noise over
+/// spacing that decided clean or noisy (kCleanNoise), or is left as it was when too few samples.
+/// Positions in any units, finite; at least 4 of them (else normals are (0, 0, 1)). Parallel,
+/// deterministic.
+int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
+                        double* noise_figure = nullptr);
 
 /// Sharpens estimated normals at edges, keeping each one's sign. Per sample: of the planes through
 /// P_i with its 16 nearest samples' normals or through P_i and two of its 12 nearest, the one most
@@ -170,8 +174,11 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// round re-scores only the sheets a flip reached). Then a second pass with a finer cut (15
 /// degrees, asin(0.125), sheets of at most n / 100) for the few wrong samples the first cut had
 /// joined to right ones. OrientNormals runs it on
-/// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours): on
-/// noisy ones sheets break into single samples whose probes lie in the noise. `eligible` (size n,
+/// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours), and
+/// of mildly noisy ones (kNormalNeighbours, NormalsReport::noise_figure under 0.2: a part a few
+/// spacings thick with a little noise; CGAL's rotor, 5,000 bare samples, 0.2-0.5 voxels of noise:
+/// 31-33 % -> 9.5-13 % of the band wrong): on noisier ones sheets break into single samples whose
+/// probes lie in the noise. `eligible` (size n,
 /// 0 or 1): the samples whose sheets may flip (OrientNormals: those of closed pieces; every
 /// sample's dipole counts in w).
 /// CGAL's bull, 5,000 samples, normals stripped: 136 signs against the exact normals -> 36, wrong
