@@ -11,7 +11,8 @@ as in the issue's table (fewer samples; Gaussian position noise of 0.5 and 1 vox
 normal noise, each normal turned by |N(0, 15 deg)| about a random tangent axis; 2 % outliers,
 uniform in the bounding box with random normals; one stray point 8 voxels outside the surface;
 an open scan, one side never scanned: the samples whose normal points away from +z by more than
-100 deg dropped; the normals stripped, which palpa then estimates and orients; virtual range scans
+100 deg dropped; the normals stripped, which palpa then estimates and orients, from the clean
+positions and from the 0.5-voxel noisy ones (a real bare scan; judged as noise); virtual range scans
 from 6 views on the upper hemisphere, `palpa sample --views 6`, without and with range noise of 0.5
 voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
@@ -111,6 +112,9 @@ def perturbations(pts, voxel, seed=1):
     # Bare positions: palpa estimates and orients the normals (--normals); Poisson gets Open3D's
     # estimate_normals and orient_normals_consistent_tangent_plane on the same positions.
     out.append(("normals stripped (estimated)", [p[:3] for p in pts]))
+    # A real bare scan is both: the 0.5-voxel draw above, without its normals (judged as noise).
+    noisy_half = next(points for name, points in out if name == "position noise 0.5 voxel")
+    out.append(("position noise 0.5 voxel, normals stripped", [p[:3] for p in noisy_half]))
     return out
 
 
