@@ -380,15 +380,34 @@ TEST_F(Cli, SparseCowPhantomsGoWhereTheDiscSpreadWindingNumberIsClearlyOutside) 
   EXPECT_LT(EvalFigure({e.code, e.out.substr(holes)}, "\"deepest_voxels\":"), 4.0) << e.out;
 }
 
+// The positions of `palpa sample`'s output `xyz` (x y z nx ny nz lines).
+std::vector<std::array<double, 3>> SampledPositions(const std::string& xyz) {
+  std::ifstream in(xyz);
+  std::vector<std::array<double, 3>> points;
+  for (double x, y, z, nx, ny, nz; in >> x >> y >> z >> nx >> ny >> nz;) points.push_back({x, y, z});
+  return points;
+}
+
+// `points` as bare x y z lines (a scan without normals), each coordinate moved by Gaussian noise
+// of standard deviation `sigma` (model units; none when 0) drawn in order from mt19937_64(seed).
+std::string BareText(const std::vector<std::array<double, 3>>& points, double sigma, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> gauss(0.0, sigma > 0 ? sigma : 1.0);
+  const auto jitter = [&] { return sigma > 0 ? gauss(rng) : 0.0; };
+  std::ostringstream bare;
+  for (const auto& p : points) {
+    const double x = p[0] + jitter(), y = p[1] + jitter(), z = p[2] + jitter();
+    bare << x << ' ' << y << ' ' << z << '\n';
+  }
+  return bare.str();
+}
+
 // The same dense sphere without normals: thinned by position before its normals are estimated
 // (the estimate over 2,000,000 points took a minute), with the oriented set's accuracy.
 TEST_F(Cli, DenseBarePositionsAreThinnedBeforeTheirNormalsAreEstimated) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/sphere.off";
   ASSERT_EQ(Palpa("sample " + mesh + " -n 60000 -o " + Path("dense.xyz") + " -q").code, 0);
-  std::ifstream in(Path("dense.xyz"));
-  std::ostringstream bare;
-  for (double x, y, z, nx, ny, nz; in >> x >> y >> z >> nx >> ny >> nz;) bare << x << ' ' << y << ' ' << z << '\n';
-  const std::string input = Write("bare.xyz", bare.str());
+  const std::string input = Write("bare.xyz", BareText(SampledPositions(Path("dense.xyz")), 0.0, 0));
   const Outcome b = Palpa("build " + input + " -o " + Path("bare.palpa") + " --cells 48 --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   const auto thinned = b.out.find("60000 samples thinned to ");
@@ -405,20 +424,13 @@ TEST_F(Cli, DenseBarePositionsAreThinnedBeforeTheirNormalsAreEstimated) {
 TEST_F(Cli, NoisyDenseBarePositionsAreThinnedToTheGridBeforeTheirNormalsAreEstimated) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/sphere.off";
   ASSERT_EQ(Palpa("sample " + mesh + " -n 60000 -o " + Path("dense.xyz") + " -q").code, 0);
-  std::ifstream in(Path("dense.xyz"));
-  std::vector<std::array<double, 3>> points;
+  const std::vector<std::array<double, 3>> points = SampledPositions(Path("dense.xyz"));
   double lo = 1e300, hi = -1e300;
-  for (double x, y, z, nx, ny, nz; in >> x >> y >> z >> nx >> ny >> nz;) {
-    points.push_back({x, y, z});
-    lo = std::min({lo, x, y, z});
-    hi = std::max({hi, x, y, z});
+  for (const auto& p : points) {
+    lo = std::min({lo, p[0], p[1], p[2]});
+    hi = std::max({hi, p[0], p[1], p[2]});
   }
-  std::mt19937_64 rng(3);
-  std::normal_distribution<double> gauss(0.0, (hi - lo) / 48);  // ~1 voxel at 48 cells
-  std::ostringstream bare;
-  for (const auto& p : points)
-    bare << p[0] + gauss(rng) << ' ' << p[1] + gauss(rng) << ' ' << p[2] + gauss(rng) << '\n';
-  const std::string input = Write("noisy_bare.xyz", bare.str());
+  const std::string input = Write("noisy_bare.xyz", BareText(points, (hi - lo) / 48, 3));  // ~1 voxel at 48 cells
   const Outcome b = Palpa("build " + input + " -o " + Path("noisy_bare.palpa") + " --cells 48 --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("60000 samples thinned to "), std::string::npos) << b.out;
@@ -434,23 +446,15 @@ TEST_F(Cli, NoisyDenseBarePositionsAreThinnedToTheGridBeforeTheirNormalsAreEstim
 TEST_F(Cli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/rotor.off";
   ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + Path("rotor.xyz") + " -q").code, 0);
-  std::ifstream in(Path("rotor.xyz"));
-  std::vector<std::array<double, 3>> points;
+  const std::vector<std::array<double, 3>> points = SampledPositions(Path("rotor.xyz"));
   std::array<double, 3> lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (double x, y, z, nx, ny, nz; in >> x >> y >> z >> nx >> ny >> nz;) {
-    points.push_back({x, y, z});
-    for (std::size_t a = 0; a < 3; ++a) {
-      lo[a] = std::min(lo[a], points.back()[a]);
-      hi[a] = std::max(hi[a], points.back()[a]);
-    }
-  }
-  const double voxel = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}) / (150 - 1 - 16);  // about
-  std::mt19937_64 rng(3);
-  std::normal_distribution<double> gauss(0.0, 0.3 * voxel);
-  std::ostringstream bare;
   for (const auto& p : points)
-    bare << p[0] + gauss(rng) << ' ' << p[1] + gauss(rng) << ' ' << p[2] + gauss(rng) << '\n';
-  const std::string input = Write("noisy_rotor.xyz", bare.str());
+    for (std::size_t a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], p[a]);
+      hi[a] = std::max(hi[a], p[a]);
+    }
+  const double voxel = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}) / (150 - 1 - 16);  // about
+  const std::string input = Write("noisy_rotor.xyz", BareText(points, 0.3 * voxel, 3));
   const Outcome b = Palpa("build " + input + " -o " + Path("noisy_rotor.palpa") + " --cells 150");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("jet fit, 18 neighbours)"), std::string::npos) << b.out;  // called noisy

@@ -102,7 +102,7 @@ double TwoSheetResidualAlong(const std::vector<V3>& positions, const std::size_t
 // jet normal fitted through two sheets can tilt by 70 degrees), 3 samples a sheet or more.
 double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
                         double scale, std::uint64_t* other_sheet = nullptr) {
-  const V3 normal = detail::FitLeastVariancePlane(positions, idx, count, [](std::size_t) { return 1.0; }).normal;
+  const V3 normal = detail::FitLeastVariancePlane(positions, idx, count, detail::UnitWeight).normal;
   return TwoSheetResidualAlong(positions, idx, count, p, scale, normal, 3, other_sheet);
 }
 
@@ -114,14 +114,9 @@ double TwoSheetResidual(const std::vector<V3>& positions, const std::size_t* idx
 // the band wrong). Noise keeps most of its residual along every axis, however split.
 double WallResidual(const std::vector<V3>& positions, const std::size_t* idx, std::size_t count, const V3& p,
                     double scale) {
-  V3 mean = V3::Zero();
-  for (std::size_t a = 0; a < count; ++a) mean += positions[idx[a]];
-  mean /= static_cast<double>(count);
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (std::size_t a = 0; a < count; ++a) {
-    const V3 d = positions[idx[a]] - mean;
-    scatter += d * d.transpose();
-  }
+  detail::AddScatter(
+      count, [&](std::size_t a) -> const V3& { return positions[idx[a]]; }, detail::UnitWeight, scatter);
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(scatter);
   if (eigen.info() != Eigen::Success) return -1.0;
   double best = -1.0;

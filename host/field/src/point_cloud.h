@@ -165,6 +165,29 @@ inline double Median(std::vector<double> values) {
   return *mid;
 }
 
+// Adds to `scatter` the weighted scatter matrix of the points point(0..count) (Eigen::Vector3d,
+// model units) about their weighted mean, sum of weight(m) d d^T with d = point(m) - mean, and
+// returns that mean (weights' total > 0). One accumulation for every PCA here, so that the same
+// points give the same bits: FitLeastVariancePlane, ThinWallCells' layers, FoldedCells
+// (samples.cc), WallResidual (normals.cc).
+template <class Point, class Weight>
+Eigen::Vector3d AddScatter(std::size_t count, Point point, Weight weight, Eigen::Matrix3d& scatter) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  double total = 0;
+  for (std::size_t m = 0; m < count; ++m) {
+    const double w = weight(m);
+    centre += w * point(m);
+    total += w;
+  }
+  centre /= total;
+  for (std::size_t m = 0; m < count; ++m) {
+    const Eigen::Vector3d d = point(m) - centre;
+    scatter += weight(m) * d * d.transpose();
+  }
+  return centre;
+}
+inline double UnitWeight(std::size_t) { return 1.0; }
+
 // The plane of least variance of the samples idx[0..count) weighted by weight(m) (total > 0):
 // through their weighted centre, its normal the scatter matrix's eigenvector of least eigenvalue
 // (sign arbitrary), `variance` that eigenvalue (the weighted sum of squared offsets from the plane,
@@ -178,19 +201,9 @@ struct LeastVariancePlane {
 template <class Weight>
 LeastVariancePlane FitLeastVariancePlane(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx,
                                          std::size_t count, Weight weight) {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  double total = 0;
-  for (std::size_t m = 0; m < count; ++m) {
-    const double w = weight(m);
-    centre += w * positions[idx[m]];
-    total += w;
-  }
-  centre /= total;
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (std::size_t m = 0; m < count; ++m) {
-    const Eigen::Vector3d d = positions[idx[m]] - centre;
-    scatter += weight(m) * d * d.transpose();
-  }
+  const Eigen::Vector3d centre = AddScatter(
+      count, [&](std::size_t m) -> const Eigen::Vector3d& { return positions[idx[m]]; }, weight, scatter);
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
   return {centre, solver.eigenvectors().col(0), solver.eigenvalues()[0]};
 }

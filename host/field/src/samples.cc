@@ -231,13 +231,12 @@ WallCells ThinWallCells(const std::vector<Eigen::Vector3d>& positions, const Cel
         Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
         for (const auto& [b, e] : {std::pair{std::size_t{0}, at}, std::pair{at, total}}) {
           if (b == e) continue;
-          Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-          for (std::size_t j = b; j < e; ++j) mean += near[along.empty() ? j : along[j].second];
-          mean /= static_cast<double>(e - b);
-          for (std::size_t j = b; j < e; ++j) {
-            const Eigen::Vector3d d = near[along.empty() ? j : along[j].second] - mean;
-            scatter += d * d.transpose();
-          }
+          detail::AddScatter(
+              e - b,
+              [&, b = b](std::size_t m) -> const Eigen::Vector3d& {
+                return near[along.empty() ? b + m : along[b + m].second];
+              },
+              detail::UnitWeight, scatter);
         }
         return scatter;
       };
@@ -356,8 +355,8 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
   std::vector<double> excess(n, -1.0);  // offset in spacings when stray, else -1
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const detail::LeastVariancePlane plane = detail::FitLeastVariancePlane(
-          positions, &nb[i * kPlaneNeighbours], kPlaneNeighbours, [](std::size_t) { return 1.0; });
+      const detail::LeastVariancePlane plane =
+          detail::FitLeastVariancePlane(positions, &nb[i * kPlaneNeighbours], kPlaneNeighbours, detail::UnitWeight);
       const double rms = std::sqrt(std::max(plane.variance, 0.0) / static_cast<double>(kPlaneNeighbours));
       const double offset = std::abs(plane.normal.dot(positions[i] - plane.centre));
       // The spacing where P is: the median of its neighbours' own (a sparse region of a real scan
@@ -465,14 +464,10 @@ std::vector<std::uint8_t> FoldedCells(const std::vector<Eigen::Vector3d>& positi
       const std::size_t b = sorted.start[c], e = sorted.start[c + 1];
       if (e - b < kLeastFoldSamples || walls.in_wall[sorted.order[b]]) continue;
       const Eigen::Vector3d origin = positions[sorted.order[b]];  // precision, as in ThinWallCells
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (std::size_t r = b; r < e; ++r) mean += positions[sorted.order[r]] - origin;
-      mean /= static_cast<double>(e - b);
       Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-      for (std::size_t r = b; r < e; ++r) {
-        const Eigen::Vector3d d = positions[sorted.order[r]] - origin - mean;
-        scatter += d * d.transpose();
-      }
+      detail::AddScatter(
+          e - b, [&](std::size_t m) -> Eigen::Vector3d { return positions[sorted.order[b + m]] - origin; },
+          detail::UnitWeight, scatter);
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> least(scatter, Eigen::EigenvaluesOnly);
       folded[c] = std::sqrt(std::max(0.0, least.eigenvalues()[0]) / static_cast<double>(e - b)) > least_rms ? 1 : 0;
     }
@@ -519,29 +514,27 @@ Simplification SimplifyBarePositions(PointSet& points, double voxel) {
     ++folds;
     for (std::size_t r = sorted.start[c]; r < sorted.start[c + 1]; ++r) in_fold[sorted.order[r]] = 1;
   }
+  // The samples i with mask[i] set, as they are, appended to `to`.
+  const bool lines = points.lines.size() == points.positions.size();
+  const auto append_where = [&](const std::vector<std::uint8_t>& mask, PointSet& to) {
+    for (std::size_t i = 0; i < points.positions.size(); ++i) {
+      if (!mask[i]) continue;
+      to.positions.push_back(points.positions[i]);
+      to.normals.push_back(points.normals[i]);
+      if (lines) to.lines.push_back(points.lines[i]);
+    }
+  };
   PointSet thinned;
   thinned.has_normals = points.has_normals;
   AppendCellMeans(
       points, sorted, [&](std::size_t i) { return !walls.in_wall[i] && !in_fold[i]; }, thinned);
   if (folds > 0) {
     PointSet fold;
-    const bool fold_lines = points.lines.size() == points.positions.size();
-    for (std::size_t i = 0; i < points.positions.size(); ++i) {
-      if (!in_fold[i]) continue;
-      fold.positions.push_back(points.positions[i]);
-      fold.normals.push_back(points.normals[i]);
-      if (fold_lines) fold.lines.push_back(points.lines[i]);
-    }
+    append_where(in_fold, fold);
     AppendCellMeans(
         fold, SortIntoCells(fold.positions, 0.5 * voxel), [](std::size_t) { return true; }, thinned);
   }
-  const bool lines = points.lines.size() == points.positions.size();
-  for (std::size_t i = 0; i < points.positions.size(); ++i) {
-    if (!walls.in_wall[i]) continue;
-    thinned.positions.push_back(points.positions[i]);
-    thinned.normals.push_back(points.normals[i]);
-    if (lines) thinned.lines.push_back(points.lines[i]);
-  }
+  append_where(walls.in_wall, thinned);
   points = std::move(thinned);
   Simplification out{half.before, points.positions.size(), wide};
   out.wall_cells = walls.cells;
