@@ -689,22 +689,22 @@ void TakeCleanestPlanes(const std::vector<V3>& positions, const detail::KdTree& 
   if (fit < 4) return;
   std::vector<V3> centre(n), plane(n);
   std::vector<double> residual(n);  // RMS offset from the fitted plane, model units
-  const auto nearest = [&](std::size_t i, std::vector<std::size_t>& idx, std::vector<double>& d2) {
-    idx.resize(reach);
-    d2.resize(reach);
-    idx.resize(tree.knnSearch(positions[i].data(), reach, idx.data(), d2.data()));  // nearest first
+  // The `count` nearest samples to sample i, nearest first.
+  const auto nearest = [&](std::size_t i, std::size_t count, std::vector<std::size_t>& idx, std::vector<double>& d2) {
+    idx.resize(count);
+    d2.resize(count);
+    idx.resize(tree.knnSearch(positions[i].data(), count, idx.data(), d2.data()));
   };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
     std::vector<std::size_t> idx;
     std::vector<double> d2;
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      nearest(i, idx, d2);
-      const std::size_t used = std::min(fit, idx.size());
+      nearest(i, fit, idx, d2);
       const detail::LeastVariancePlane p =
-          detail::FitLeastVariancePlane(positions, idx.data(), used, detail::UnitWeight);
+          detail::FitLeastVariancePlane(positions, idx.data(), idx.size(), detail::UnitWeight);
       centre[i] = p.centre;
       plane[i] = p.normal;
-      residual[i] = std::sqrt(std::max(p.variance, 0.0) / static_cast<double>(used));
+      residual[i] = p.Rms(idx.size());
     }
   });
   const double median = detail::Median(residual);
@@ -714,7 +714,7 @@ void TakeCleanestPlanes(const std::vector<V3>& positions, const detail::KdTree& 
     std::vector<double> d2;
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (!(residual[i] > kCreaseResidual * median)) continue;
-      nearest(i, idx, d2);
+      nearest(i, reach, idx, d2);
       double least = kCleanerShare * residual[i];
       std::size_t taken = n;
       for (const std::size_t j : idx) {

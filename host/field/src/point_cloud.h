@@ -197,6 +197,8 @@ struct LeastVariancePlane {
   Eigen::Vector3d centre;
   Eigen::Vector3d normal;
   double variance;
+  // The RMS offset of the `count` (unit-weight) samples fitted from the plane, model units.
+  double Rms(std::size_t count) const { return std::sqrt(std::max(variance, 0.0) / static_cast<double>(count)); }
 };
 template <class Weight>
 LeastVariancePlane FitLeastVariancePlane(const std::vector<Eigen::Vector3d>& positions, const std::size_t* idx,

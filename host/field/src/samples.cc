@@ -357,7 +357,7 @@ StraySamples FindStraySamples(const std::vector<Eigen::Vector3d>& positions,
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const detail::LeastVariancePlane plane =
           detail::FitLeastVariancePlane(positions, &nb[i * kPlaneNeighbours], kPlaneNeighbours, detail::UnitWeight);
-      const double rms = std::sqrt(std::max(plane.variance, 0.0) / static_cast<double>(kPlaneNeighbours));
+      const double rms = plane.Rms(kPlaneNeighbours);
       const double offset = std::abs(plane.normal.dot(positions[i] - plane.centre));
       // The spacing where P is: the median of its neighbours' own (a sparse region of a real scan
       // is not an outlier; a sample far from a normally dense surface is).
