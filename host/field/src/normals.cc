@@ -464,7 +464,7 @@ V3 SupportersQuadricNormal(const std::vector<V3>& positions, const std::size_t* 
 
 }  // namespace
 
-int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, double* noise_figure) {
+int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, double* noise_figure, bool noisy) {
   detail::JetNormalLines(positions, kCleanNormalNeighbours, normals);
   const std::size_t n = positions.size();
   // Too few to measure the noise: the fit took them all (n - 1 neighbours).
@@ -494,7 +494,7 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
   });
   const double figure = detail::Median(std::move(relative));
   if (noise_figure != nullptr) *noise_figure = figure;
-  if (figure < kCleanNoise) return kCleanNormalNeighbours;
+  if (figure < kCleanNoise && !noisy) return kCleanNormalNeighbours;
   // Noisy: 18 neighbours; where the lines of nearest neighbours still differ by more than
   // kRoughNormalsDeg on the median (noise, not curvature, at that spacing), more, until they
   // differ by kSmoothNormalsDeg at most.

@@ -99,10 +99,13 @@ inline constexpr int kMostNormalNeighbours = 96;
 /// exact normals with 18, 1.18-2.27x with 10; bench/field/robustness.py --seed 2). Returns the
 /// neighbour count of the normals given; `noise_figure`, when given, receives the median noise over
 /// spacing that decided clean or noisy (kCleanNoise), or is left as it was when too few samples.
+/// `noisy`: fit as a noisy set whatever the figure (`palpa build` sets it when the positions' noise
+/// is over a quarter of the grid's voxel, where the figure, relative to the spacing, called them
+/// clean: docs/field-methods.md § Noisy for the grid, clean for the spacing).
 /// Positions in any units, finite; at least 4 of them (else normals are (0, 0, 1)). Parallel,
 /// deterministic.
 int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
-                        double* noise_figure = nullptr);
+                        double* noise_figure = nullptr, bool noisy = false);
 
 /// Sharpens estimated normals at edges, keeping each one's sign. Per sample: of the planes through
 /// P_i with its 16 nearest samples' normals or through P_i and two of its 12 nearest, the one most
