@@ -12,7 +12,8 @@ normal noise, each normal turned by |N(0, 15 deg)| about a random tangent axis; 
 uniform in the bounding box with random normals; one stray point 8 voxels outside the surface;
 an open scan, one side never scanned: the samples whose normal points away from +z by more than
 100 deg dropped; the normals stripped, which palpa then estimates and orients, from the clean
-positions and from the 0.5-voxel noisy ones (a real bare scan; judged as noise); virtual range scans
+positions and from the 0.5-voxel noisy ones (a real bare scan; judged as noise), and from a 0.3-voxel
+draw (noisy for the grid, clean for the spacing; judged as noise); virtual range scans
 from 6 views on the upper hemisphere, `palpa sample --views 6`, without and with range noise of 0.5
 voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
@@ -115,6 +116,12 @@ def perturbations(pts, voxel, seed=1):
     # A real bare scan is both: the 0.5-voxel draw above, without its normals (judged as noise).
     noisy_half = next(points for name, points in out if name == "position noise 0.5 voxel")
     out.append(("position noise 0.5 voxel, normals stripped", [p[:3] for p in noisy_half]))
+    # Less noise than the spacing's clean limit but more than the denoiser's quarter voxel: the
+    # normals are fitted as clean while the positions are denoised (docs/field-methods.md § Noisy
+    # for the grid, clean for the spacing). Judged as noise.
+    rng = random.Random(2 + 1000 * (seed - 1))
+    out.append(("position noise 0.3 voxel, normals stripped",
+                [[p[a] + rng.gauss(0, 0.3 * voxel) for a in range(3)] for p in pts]))
     return out
 
 
