@@ -221,9 +221,11 @@ TEST(HermiteTargets, EstimatedNormalsOfALowPolygonPartFollowItsFacets) {
 // sheet pass ran on closed pieces only: 980 normals inward, wrong sign in the band 24.8 % against
 // 0.93 % with the exact normals (26.8x). The pass now runs again on pieces open by their flux,
 // with sheets up to n / 4, and stands where it closes the piece: 127 inward, 2.35 % (2.54x).
+// Since the eighteenth session a second spanning tree that prefers the pairs facing each other
+// across the flange closes the piece first (83 inward, 1.98x; the sheet pass had reached 83, 2.00x).
 TEST(HermiteTargets, EstimatedNormalsOfAFlangedPartTurnAnInvertedFace) {
   const EstimatedAgainstExact r = EstimateAndCompare("spool.off");
-  EXPECT_EQ(r.report.closed_by_sheets, 1u);
+  EXPECT_EQ(r.report.closed_by_tree + r.report.closed_by_sheets, 1u) << r.report.Describe();
   EXPECT_LT(r.inward, 150u);
   EXPECT_LT(r.ratio, 4.0);
 }

@@ -583,6 +583,53 @@ TEST(Normals, RefinedLinesTakeTheFaceNormalNearACubeEdge) {
   EXPECT_EQ(inner_off(normals), 0u);
 }
 
+// Issue 20: bare noisy samples of a disc thinner than the spacing. The spanning tree can cross
+// the disc round its rim, where the noisy lines blend, and turn one face inward as a whole (CGAL's
+// turbine, seeds 22 and 24 at 0.25 voxel: 43 % of the normals inward). The piece is then open by
+// its flux, and a second tree that prefers the pairs facing each other across the disc closes it.
+// The disc: radius 0.5, 0.03 thick, 5,000 samples, noise 0.25 of a voxel at 150 cells (1 / 133).
+TEST(Normals, ANoisyDiscThinnerThanTheSpacingIsNotTurnedInwardOnOneFace) {
+  constexpr double kRadius = 0.5, kHalf = 0.015, kSigma = 0.25 / 133.0;
+  std::size_t closed_by_tree = 0, worst = 0;
+  for (unsigned seed = 1; seed <= 8; ++seed) {
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::normal_distribution<double> noise(0.0, kSigma);
+    const double caps = 2.0 * std::numbers::pi * kRadius * kRadius;
+    const double side = 2.0 * std::numbers::pi * kRadius * 2.0 * kHalf;
+    Oriented disc;
+    for (std::size_t k = 0; k < 5000; ++k) {
+      const double a = 2.0 * std::numbers::pi * unit(random);
+      V3 p, n;
+      if (unit(random) < caps / (caps + side)) {
+        const double r = kRadius * std::sqrt(unit(random));
+        const double z = unit(random) < 0.5 ? kHalf : -kHalf;
+        p = V3(r * std::cos(a), r * std::sin(a), z);
+        n = V3(0, 0, z > 0 ? 1.0 : -1.0);
+      } else {
+        p = V3(kRadius * std::cos(a), kRadius * std::sin(a), kHalf * (2.0 * unit(random) - 1.0));
+        n = V3(std::cos(a), std::sin(a), 0);
+      }
+      const double dx = noise(random), dy = noise(random), dz = noise(random);  // in this order
+      disc.positions.push_back(p + V3(dx, dy, dz));
+      disc.normals.push_back(n);
+    }
+    std::vector<V3> normals;
+    EstimateNormalLines(disc.positions, normals);
+    NormalsReport report;
+    OrientNormals(disc.positions, normals, false, report, true);
+    closed_by_tree += report.closed_by_tree;
+    std::size_t inward = 0;
+    for (std::size_t i = 0; i < normals.size(); ++i) inward += normals[i].dot(disc.normals[i]) < 0 ? 1u : 0u;
+    worst = std::max(worst, inward);
+    EXPECT_LT(inward, 250u) << "seed " << seed << ": " << report.Describe();
+  }
+  // Measured: the second tree stood on 4 of the 8 draws (without it those had 2,376-2,524 normals
+  // inward); the most inward on any draw: 144.
+  EXPECT_GE(closed_by_tree, 1u);
+  std::printf("[ disc ] second tree on %zu of 8 draws; at most %zu of 5000 normals inward\n", closed_by_tree, worst);
+}
+
 // Issue 20: bare samples with position noise of a box: near a crease the jet fit and the noisy
 // set's refinement blend the two faces; a neighbour's fit that stays on one face does not
 // (TakeCleanestPlanes). The noise is fandisk's at 0.5 voxel, 5,000 samples and 150 cells: 0.12 of

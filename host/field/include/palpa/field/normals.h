@@ -54,6 +54,7 @@ struct NormalsReport {
   std::size_t open_level_flipped = 0;        ///< estimate: open pieces whose sign the winding level reversed
   std::size_t sheets = 0;                    ///< estimate: sheets turned by the winding energy (FlipSheetsByWinding)
   std::size_t sheet_samples = 0;             ///< their samples
+  std::size_t closed_by_tree = 0;            ///< estimate: open pieces a tree across thin walls closed
   std::size_t closed_by_sheets = 0;          ///< estimate: open pieces that turning large sheets closed
   std::size_t closed_by_sheets_samples = 0;  ///< the normals turned there
   /// "5210 normals estimated (jet fit, 10 neighbours: the samples are clean) and oriented: 1 piece
@@ -204,15 +205,19 @@ std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, s
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
 /// edge exact face normals are near perpendicular and carry no sign), then the component's outward
-/// sign, then each given normal takes the sign of its oriented jet normal, then FlipInvertedParts
+/// sign (under estimate, a piece the tree leaves open by its flux is oriented again by a tree that
+/// prefers the pairs facing each other across thin walls, kept where it closes the piece: a disc
+/// thinner than the spacing that the first tree crossed round its rim), then each given normal
+/// takes the sign of its oriented jet normal, then FlipInvertedParts
 /// over all samples. `keep_file_majority` (orient mode) decides open components by the majority of
 /// the signs given; without it an open component whose mean winding level (SampleProbes::Levels, by area)
 /// is below 0 is reversed, and FlipSheetsByWinding runs last: on closed pieces, then on pieces
 /// open by their flux (at most 0.6 of the area) with sheets of up to n / 4, kept where it closes
 /// them (a sheet the tree turned inward as a whole). `given_are_jet_lines`: the normals are
 /// EstimateNormalLines' already (estimate mode; not fitted twice). Unit normals in, same lines out. Counts into
-/// `report` (flipped, components, open_components, open_level_flipped, inverted_parts, inverted_samples, sheets,
-/// sheet_samples, closed_by_sheets, closed_by_sheets_samples). O(n log n); parallel and deterministic.
+/// `report` (flipped, components, open_components, closed_by_tree, open_level_flipped, inverted_parts,
+/// inverted_samples, sheets, sheet_samples, closed_by_sheets, closed_by_sheets_samples). O(n log n); parallel and
+/// deterministic.
 void OrientNormals(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                    bool keep_file_majority, NormalsReport& report, bool given_are_jet_lines = false);
 
