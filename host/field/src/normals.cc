@@ -1426,12 +1426,13 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
       const TreeSigns retry = SignsByTree(positions, given, smooth, given_are_jet_lines, kFacingRetryBase);
       if (retry.pieces == pieces && retry.component == tree.component) {
         const std::vector<V3> second = piece_flux(retry);
-        for (std::size_t c = 0; c < pieces; ++c)
-          if (first[c].norm() >= kOpenPieceFlux * area[c] && second[c].norm() < detail::kClosedFlux * area[c]) {
-            ++report.closed_by_tree;
-            for (std::size_t i = 0; i < n; ++i)
-              if (tree.component[i] == c) tree.keep[i] = retry.keep[i];
-          }
+        std::vector<std::uint8_t> closes(pieces, 0);
+        for (std::size_t c = 0; c < pieces; ++c) {
+          closes[c] = first[c].norm() >= kOpenPieceFlux * area[c] && second[c].norm() < detail::kClosedFlux * area[c];
+          report.closed_by_tree += closes[c];
+        }
+        for (std::size_t i = 0; i < n; ++i)
+          if (closes[tree.component[i]] != 0) tree.keep[i] = retry.keep[i];
       }
     }
   }
