@@ -261,7 +261,14 @@ TEST(UploadProcess, StatusReportsTheFieldAndAnAcceptedUploadSwapsIt) {
   const Inputs& in = Shared();
   Palpad p("accept");
   ASSERT_NE(p.port(), 0) << p.log();
+  // palpad's listener starts just before its servo loop: a status fetched in between, on a
+  // loaded machine, reads "not running" (CI, 2026-11-27). Asked again for up to 2 s; a loop that
+  // ended (a fault) still reads false.
   auto s = FetchStatus(p.endpoint(), in.k, 2000ms);
+  for (int again = 0; again < 20 && s.has_value() && !s->running; ++again) {
+    std::this_thread::sleep_for(100ms);
+    s = FetchStatus(p.endpoint(), in.k, 2000ms);
+  }
   ASSERT_TRUE(s.has_value()) << s.error().message;
   EXPECT_EQ(s->field_crc32c, CrcOf(in.a_bytes));
   EXPECT_EQ(s->field_bytes, in.a_bytes.size());
@@ -574,7 +581,11 @@ TEST(UploadProcess, ThousandSwapsWhileInContactNeverStepTheForce) {
   // had would be paid at every swap, so more than 1 % of the swap ticks slow fails.
   std::printf("[ swaps ] swap ticks whose own compute missed the deadline: %zu of %zu\n", swap_overruns, swaps);
   EXPECT_LE(swap_overruns, swaps / 100) << "swap ticks' own work missed their deadline";
-  EXPECT_LE(overruns, rows.size() / 100) << "missed ticks: more than 1 % (machine overloaded?)";
+  // The machine's own wake-up tail, not the code: on 2026-11-27 this VM, idle, woke 0.9 % of
+  // cyclictest's 1 kHz wake-ups over 1 ms late and 1.9 % over 0.5 ms (docs/runtime.md), and this
+  // test saw 1.7-2.1 % of its ticks overrun. Over 5 % the machine is too loaded for the figures above
+  // to mean anything.
+  EXPECT_LE(overruns, rows.size() / 20) << "missed ticks: more than 5 % (machine overloaded?)";
   EXPECT_GT(contact_share, 0.5) << "the trace must be in contact most of the time";
   EXPECT_GT(loaded_swaps, 100u) << "many swaps must happen under load, or the bound proves nothing";
   EXPECT_LE(max_step, bound);
