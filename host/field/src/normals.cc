@@ -477,8 +477,9 @@ V3 SupportersQuadricNormal(const std::vector<V3>& positions, const std::size_t* 
 }  // namespace
 
 int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, double* noise_figure, bool noisy) {
-  detail::JetNormalLines(positions, kCleanNormalNeighbours, normals);
   const std::size_t n = positions.size();
+  if (!noisy || n <= static_cast<std::size_t>(kCleanNormalNeighbours))
+    detail::JetNormalLines(positions, kCleanNormalNeighbours, normals);
   // Too few to measure the noise: the fit took them all (n - 1 neighbours).
   if (n <= static_cast<std::size_t>(kCleanNormalNeighbours)) return n > 0 ? static_cast<int>(n - 1) : 0;
   // The noise relative to the spacing, over the same 10 nearest (wider, the fit of a sample on a
@@ -488,25 +489,28 @@ int EstimateNormalLines(const std::vector<V3>& positions, std::vector<V3>& norma
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   constexpr auto k = static_cast<std::size_t>(kCleanNormalNeighbours);
-  std::vector<double> relative(count);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& r) {
-    std::vector<std::size_t> idx(k + 1);
-    std::vector<double> d2(k + 1);
-    for (std::size_t s = r.begin(); s != r.end(); ++s) {
-      const std::size_t i = s * stride;
-      const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
-      const double eighth = std::sqrt(d2[std::min<std::size_t>(8, got - 1)]);
-      const double scale = std::sqrt(d2[got - 1]);
-      double residual = detail::QuadricResidual(positions, idx.data(), got, positions[i], normals[i], scale, 8,
-                                                [](std::size_t) { return true; });
-      const double sheets = WallResidual(positions, idx.data(), got, positions[i], scale);
-      if (sheets >= 0.0 && sheets < kTwoSheetShare * residual) residual = sheets;
-      relative[s] = eighth > 0 ? std::max(residual, 0.0) / eighth : 0.0;
-    }
-  });
-  const double figure = detail::Median(std::move(relative));
-  if (noise_figure != nullptr) *noise_figure = figure;
-  if (figure < kCleanNoise && !noisy) return kCleanNormalNeighbours;
+  // A fit forced noisy (`noisy`) skips the measure: its result would be thrown away.
+  if (!noisy) {
+    std::vector<double> relative(count);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& r) {
+      std::vector<std::size_t> idx(k + 1);
+      std::vector<double> d2(k + 1);
+      for (std::size_t s = r.begin(); s != r.end(); ++s) {
+        const std::size_t i = s * stride;
+        const std::size_t got = tree.knnSearch(positions[i].data(), k + 1, idx.data(), d2.data());
+        const double eighth = std::sqrt(d2[std::min<std::size_t>(8, got - 1)]);
+        const double scale = std::sqrt(d2[got - 1]);
+        double residual = detail::QuadricResidual(positions, idx.data(), got, positions[i], normals[i], scale, 8,
+                                                  [](std::size_t) { return true; });
+        const double sheets = WallResidual(positions, idx.data(), got, positions[i], scale);
+        if (sheets >= 0.0 && sheets < kTwoSheetShare * residual) residual = sheets;
+        relative[s] = eighth > 0 ? std::max(residual, 0.0) / eighth : 0.0;
+      }
+    });
+    const double figure = detail::Median(std::move(relative));
+    if (noise_figure != nullptr) *noise_figure = figure;
+    if (figure < kCleanNoise) return kCleanNormalNeighbours;
+  }
   // Noisy: 18 neighbours; where the lines of nearest neighbours still differ by more than
   // kRoughNormalsDeg on the median (noise, not curvature, at that spacing), more, until they
   // differ by kSmoothNormalsDeg at most.
@@ -1424,7 +1428,8 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     for (std::size_t c = 0; c < pieces; ++c) any_open = any_open || first[c].norm() >= kOpenPieceFlux * area[c];
     if (any_open) {
       const TreeSigns retry = SignsByTree(positions, given, smooth, given_are_jet_lines, kFacingRetryBase);
-      if (retry.pieces == pieces && retry.component == tree.component) {
+      // The same neighbour graph: the same pieces, numbered alike; only the edges' costs differ.
+      {
         const std::vector<V3> second = piece_flux(retry);
         std::vector<std::uint8_t> closes(pieces, 0);
         for (std::size_t c = 0; c < pieces; ++c) {

@@ -102,7 +102,8 @@ inline constexpr int kMostNormalNeighbours = 96;
 /// spacing that decided clean or noisy (kCleanNoise), or is left as it was when too few samples.
 /// `noisy`: fit as a noisy set whatever the figure (`palpa build` sets it when the positions' noise
 /// is over a quarter of the grid's voxel, where the figure, relative to the spacing, called them
-/// clean: docs/field-methods.md § Noisy for the grid, clean for the spacing).
+/// clean: docs/field-methods.md § Noisy for the grid, clean for the spacing; the figure is then not
+/// measured and `noise_figure` left as it was).
 /// Positions in any units, finite; at least 4 of them (else normals are (0, 0, 1)). Parallel,
 /// deterministic.
 int EstimateNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
