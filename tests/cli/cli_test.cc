@@ -496,6 +496,28 @@ TEST_F(Cli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
   EXPECT_EQ(off.out.find("fitted again"), std::string::npos) << off.out;
 }
 
+// Issue 20: bare noisy samples of a part whose creases and teeth are as fine as the normals' fit
+// (the pinion, 5,000 samples, 0.3 voxel of noise per axis): the bisector moves followed lines that
+// do not carry the shape, 1.6 x the noise RMS, and left the samples farther from the surface. The
+// moves are undone and only the field is filtered: band mean 0.349 -> 0.236 voxel, wrong sign
+// 5.57 -> 3.89 %, no far-wrong node either way.
+TEST_F(Cli, BareNoisySamplesAreNotMovedFartherThanTheirNoise) {
+  const std::string mesh = std::string(PALPA_DATA_DIR) + "/pinion.off";
+  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + Path("pinion.xyz") + " -q").code, 0);
+  const std::vector<std::array<double, 3>> points = SampledPositions(Path("pinion.xyz"));
+  const double voxel = VoxelAt150Cells(points);
+  const std::string input = Write("noisy_pinion.xyz", BareText(points, 0.3 * voxel, 3));
+  const Outcome b = Palpa("build " + input + " -o " + Path("noisy_pinion.palpa") + " --cells 150 --format 1");
+  ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_NE(b.out.find("more than that noise explains"), std::string::npos) << b.out;
+  EXPECT_NE(b.out.find("the samples were kept in place and only the field filtered"), std::string::npos) << b.out;
+  EXPECT_EQ(b.out.find("samples moved along their normals"), std::string::npos) << b.out;
+  const Outcome e = Palpa("eval " + Path("noisy_pinion.palpa") + " --mesh " + mesh + " --json");
+  ASSERT_EQ(e.code, 0) << e.out;
+  EXPECT_LT(EvalFigure(e, "\"mean_abs_error\":"), 0.28) << e.out;
+  EXPECT_LT(EvalFigure(e, "\"far_wrong\":"), 100.0) << e.out;
+}
+
 // Issue 20, position noise: a sphere926 with Gaussian noise of ~0.75 voxel per axis is denoised by
 // default, says so with the noise it measured, and scores better against the true sphere than
 // with --denoise off (which leaves the samples as they are and says nothing).

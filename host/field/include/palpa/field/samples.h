@@ -166,6 +166,8 @@ struct NoiseSmoothing {
   std::size_t moved = 0;  ///< samples moved (0 when the noise was below the threshold)
   double mean_move = 0;   ///< mean |move| over the moved samples, all passes, units of the positions
   int passes = 0;         ///< move passes run (0 when the noise was below the threshold)
+  double rms_move = 0;    ///< RMS |move| over all samples, all passes, units of the positions (also when withheld)
+  bool withheld = false;  ///< the passes ran, but fitted normals' moves exceeded 1.4 x `noise` RMS: undone
   bool Applied() const { return moved > 0; }
 };
 
@@ -188,11 +190,15 @@ struct NoiseSmoothing {
 /// 48-sample quadrics, where the normals turn by more than 37 degrees within 16 samples) and without mixing the faces
 /// of a sharp edge or the two sides of a thin wall (CGAL's jet_smooth_point_set rounds fandisk's edges,
 /// bilateral_smooth_point_set shrinks curved parts). It needs the normals' direction: 15-degree
-/// normal noise costs it about as much as it gains (docs/field-methods.md § Noise). Normals are
-/// kept. Shapes: positions and normals of equal length, normals unit; fewer than `neighbours` + 1
-/// samples or `neighbours` < 8: nothing measured or moved. Deterministic.
+/// normal noise costs it about as much as it gains (docs/field-methods.md § Noise). With
+/// `fitted_normals` (normals estimated from these positions) the moves must look like the noise
+/// they remove: when their RMS over all samples exceeds 1.4 x `noise`, the lines were fitted
+/// across the shape (bare samples of creases and walls as fine as the neighbourhoods) and every
+/// position is restored (`withheld`; the discrepancy principle, docs/field-methods.md § Moves
+/// larger than the noise). Normals are kept. Shapes: positions and normals of equal length, normals unit; fewer than
+/// `neighbours` + 1 samples or `neighbours` < 8: nothing measured or moved. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
-                                    double threshold, int passes = kMovePasses);
+                                    double threshold, int passes = kMovePasses, bool fitted_normals = false);
 
 }  // namespace palpa::field
