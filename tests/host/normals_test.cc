@@ -1473,11 +1473,15 @@ TEST(SmoothNoisyPositions, MeasuresTheNoiseAndAveragesItOnASphere) {
   };
   const double before = rms_radial();
   EXPECT_NEAR(before, sigma, 0.1 * sigma);
+  const NoiseSmoothing measured = MeasurePositionNoise(sphere.positions, sphere.normals, 48);
+  EXPECT_EQ(measured.moved, 0u);
   // As if fitted: normals that follow the shape pass the moves' discrepancy check.
   const NoiseSmoothing done =
       SmoothNoisyPositions(sphere.positions, sphere.normals, 48, 0.5 * sigma, kMovePasses, /*fitted_normals=*/true);
   ASSERT_TRUE(done.Applied());
   EXPECT_NEAR(done.noise, sigma, 0.2 * sigma);  // the residual of 16-neighbour quadrics, dof-corrected
+  EXPECT_EQ(measured.noise, done.noise);        // the measure alone is the same measure
+  EXPECT_EQ(measured.residual, done.residual);
   EXPECT_EQ(done.moved, sphere.positions.size());
   EXPECT_LT(rms_radial(), before / 3.0);  // 48 neighbours, twice: sigma / sqrt(48) ideally
   // The moves take out the noise, so their RMS is about the noise's; far beyond it they are undone.

@@ -179,14 +179,13 @@ int RunBuild(const BuildArgs& args) {
     // Samples clean for their spacing can be noisy for the grid: --denoise auto below then moves
     // them along their lines, and 10-sample lines carry the noise into the moves (joint, 5,000 bare
     // samples with 0.3 voxel of noise, seed 1: band mean 0.248 -> 0.145 voxel with the noisy fit). The
-    // denoiser's measure and threshold on the provisional voxel (0 passes: measured, not moved);
-    // the lines the clean fit oriented keep their signs.
+    // denoiser's measure and threshold on the provisional voxel; the lines the clean fit oriented
+    // keep their signs.
     bool refit = false;
     if (normals_mode == field::NormalsMode::kEstimate && normals_report.neighbours == field::kCleanNormalNeighbours &&
         args.denoise == "auto" && provisional_voxel > 0) {
       const double threshold = kDenoiseVoxels * provisional_voxel;
-      if (field::SmoothNoisyPositions(points->positions, points->normals, kDenoiseNeighbours, threshold, 0).noise >
-          threshold) {
+      if (field::MeasurePositionNoise(points->positions, points->normals, kDenoiseNeighbours).noise > threshold) {
         std::vector<Eigen::Vector3d> lines;
         normals_report.neighbours = field::EstimateNormalLines(points->positions, lines, nullptr, true);
         for (std::size_t i = 0; i < lines.size(); ++i)

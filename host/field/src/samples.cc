@@ -715,6 +715,15 @@ void BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eig
 
 }  // namespace
 
+NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& positions,
+                                    const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours) {
+  constexpr std::size_t kMinNeighbours = 8;
+  if (positions.size() <= neighbours || normals.size() != positions.size() || neighbours < kMinNeighbours) return {};
+  const detail::PointCloud cloud{&positions};
+  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  return MeasureNoise(positions, normals, tree, neighbours);
+}
+
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
                                     double threshold, int passes, bool fitted_normals) {

@@ -171,6 +171,13 @@ struct NoiseSmoothing {
   bool Applied() const { return moved > 0; }
 };
 
+/// SmoothNoisyPositions' measure alone, nothing moved: `noise` and `residual` as it finds them
+/// for the same arguments (`moved`, `passes` 0). For deciding on the noise before the moves, e.g.
+/// whether estimated normals should be fitted as a noisy set (palpa build). Same shapes and
+/// limits; deterministic.
+NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& positions,
+                                    const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours);
+
 /// Position noise (issue 20): a sample's own noise reaches the field whole, through its patch and
 /// its balls. Measures the noise first: for every sample a quadric height function z(u, v) along
 /// its normal, fitted by least squares to its nearest samples whose normals agree with it
