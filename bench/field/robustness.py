@@ -43,6 +43,7 @@ import os
 import random
 import struct
 import subprocess
+import sys
 import time
 
 
@@ -202,13 +203,34 @@ def poisson(o3d, pts, out, depth, clean=False):
     return seconds
 
 
-def score_poisson(ev, blob, o3d, pts, mesh, depth, work):
-    """Poisson on `pts`, scored on the grid of `blob` (palpa's field of the same points)."""
+class PoissonCrashed(Exception):
+    """Open3D's Poisson died (it faults now and then inside libOpen3D 0.16), twice in a row."""
+
+
+def poisson_in_child(points_path, out, depth, clean):
+    """poisson() on the points of `points_path` in a child process of this script, so that a fault
+    inside Open3D costs one row, not the run: its seconds. Tried twice; raises PoissonCrashed."""
+    cmd = [sys.executable, os.path.abspath(__file__), "--poisson-child", points_path, out, str(depth),
+           "1" if clean else "0"]
+    for _ in range(2):
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode == 0:
+            return float(r.stdout.split()[-1])
+    how = f"signal {-r.returncode}" if r.returncode < 0 else f"exit {r.returncode}"
+    raise PoissonCrashed(f"Open3D's Poisson failed twice ({how})")
+
+
+def score_poisson(ev, blob, points_path, mesh, depth, work):
+    """Poisson on the points of `points_path`, scored on the grid of `blob` (palpa's field of the
+    same points)."""
     off = os.path.join(work, "poisson.off")
     # Scored as Open3D returns it (an open or non-manifold mesh is signed by its winding number,
     # and the row says so); if eval still refuses it, once more after Open3D's own clean-up.
     for clean in (False, True):
-        seconds = poisson(o3d, pts, off, depth, clean)
+        try:
+            seconds = poisson_in_child(points_path, off, depth, clean)
+        except PoissonCrashed as crash:
+            return {"error": str(crash)}
         e = subprocess.run([ev, "eval", blob, "--mesh", mesh, "--candidate-mesh", off, "--json"],
                            capture_output=True, text=True)
         if e.returncode == 0:
@@ -380,7 +402,7 @@ def main():
                 row += [f"{r['mean']:.3f}", f"{r['wrong']:.2f}", f"{r['far']:,} ({r['phantom']:,}/{r['holes']:,})",
                         f"{r['faces']:,}"]
                 if c == "palpa" and o3d is not None:
-                    q = score_poisson(ev, blob, o3d, p, mesh, args.depth, args.work)
+                    q = score_poisson(ev, blob, path, mesh, args.depth, args.work)
                     poisson_q = q
                     poisson_cells = (["n/a", "n/a", q["error"]] if "error" in q else
                                      [f"{q['mean']:.3f}", f"{q['wrong']:.2f}",
@@ -404,4 +426,10 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    if len(sys.argv) == 6 and sys.argv[1] == "--poisson-child":  # poisson_in_child's process
+        _, _, points_path, out, depth, clean = sys.argv
+        with open(points_path) as f:  # oriented (6 columns) or bare (3: the stripped rows)
+            rows = [[float(x) for x in v] for v in (line.split("#")[0].split() for line in f) if len(v) in (3, 6)]
+        print(poisson(need_open3d(), rows, out, int(depth), clean == "1"))
+    else:
+        main()

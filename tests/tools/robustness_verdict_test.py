@@ -68,6 +68,14 @@ class Verdict(unittest.TestCase):
         self.assertEqual(verdict("2 % outliers", figures(far=101), None, None), ["far 101 > 100"])
 
 
+class PoissonChild(unittest.TestCase):
+    def test_a_failing_poisson_costs_its_row_not_the_run(self):
+        # Open3D faults now and then inside its Poisson; the child process takes the fault. Here the
+        # child fails before Open3D (no such points file), twice, and the row gets an error.
+        q = robustness.score_poisson("palpa", "no.palpa", "/nonexistent/points.xyz", "no.off", 9, "/tmp")
+        self.assertEqual(q, {"error": "Open3D's Poisson failed twice (exit 1)"})
+
+
 class Run(unittest.TestCase):
     palpa = None
     work = None
