@@ -1415,6 +1415,10 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
       sum[signs.component[i]] += areas[i] * (signs.keep[i] ? given[i] : V3(-given[i]));
     return sum;
   };
+  std::vector<V3> flux = piece_flux(tree);
+  const auto is_open = [&](const std::vector<V3>& sums, std::size_t c) {
+    return sums[c].norm() >= kOpenPieceFlux * area[c];
+  };
   // A tree over estimated lines may cross a wall thinner than the spacing round its rim, where
   // noisy lines blend, and turn one side inward as a whole: the piece comes out open by its flux.
   // A second tree that prefers the pairs facing each other across the wall (kFacingRetryBase)
@@ -1422,24 +1426,22 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   // samples with 0.25 voxel of noise: seeds 22 and 24 had 43 % of the normals inward). Only there:
   // as the first tree it would blend facing pairs into noisy sheets (the cow at 1 voxel of noise,
   // band mean 0.38 -> 0.80 voxel).
-  if (given_are_jet_lines && pieces > 0) {
-    const std::vector<V3> first = piece_flux(tree);
-    bool any_open = false;
-    for (std::size_t c = 0; c < pieces; ++c) any_open = any_open || first[c].norm() >= kOpenPieceFlux * area[c];
-    if (any_open) {
-      const TreeSigns retry = SignsByTree(positions, given, smooth, given_are_jet_lines, kFacingRetryBase);
-      // The same neighbour graph: the same pieces, numbered alike; only the edges' costs differ.
-      {
-        const std::vector<V3> second = piece_flux(retry);
-        std::vector<std::uint8_t> closes(pieces, 0);
-        for (std::size_t c = 0; c < pieces; ++c) {
-          closes[c] = first[c].norm() >= kOpenPieceFlux * area[c] && second[c].norm() < detail::kClosedFlux * area[c];
-          report.closed_by_tree += closes[c];
-        }
-        for (std::size_t i = 0; i < n; ++i)
-          if (closes[tree.component[i]] != 0) tree.keep[i] = retry.keep[i];
-      }
+  bool any_open = false;
+  for (std::size_t c = 0; c < pieces; ++c) any_open = any_open || is_open(flux, c);
+  if (given_are_jet_lines && any_open) {
+    // The same neighbour graph: the same pieces, numbered alike; only the edges' costs differ.
+    const TreeSigns retry = SignsByTree(positions, given, smooth, given_are_jet_lines, kFacingRetryBase);
+    const std::vector<V3> second = piece_flux(retry);
+    std::vector<std::uint8_t> closes(pieces, 0);
+    std::size_t closed = 0;
+    for (std::size_t c = 0; c < pieces; ++c) {
+      closes[c] = is_open(flux, c) && second[c].norm() < detail::kClosedFlux * area[c];
+      closed += closes[c];
     }
+    for (std::size_t i = 0; i < n; ++i)
+      if (closes[tree.component[i]] != 0) tree.keep[i] = retry.keep[i];
+    report.closed_by_tree += closed;
+    if (closed > 0) flux = piece_flux(tree);
   }
   const std::vector<std::uint32_t>& component = tree.component;
   const std::vector<std::uint8_t>& keep = tree.keep;
@@ -1454,11 +1456,9 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     total_area += areas[i];
   }
   centre = total_area > 0 ? V3(centre / total_area) : positions[0];
-  std::vector<V3> flux(pieces, V3::Zero());
   std::vector<double> divergence(pieces, 0.0), agreement(pieces, 0.0);
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint32_t c = component[i];
-    flux[c] += areas[i] * oriented[i];
     divergence[c] += areas[i] * oriented[i].dot(positions[i] - centre);
     agreement[c] += keep[i] ? areas[i] : -areas[i];
   }
@@ -1466,7 +1466,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   report.components = pieces;
   report.open_components = 0;
   for (std::size_t c = 0; c < pieces; ++c) {
-    const bool open = flux[c].norm() >= kOpenPieceFlux * area[c];
+    const bool open = is_open(flux, c);
     report.open_components += open ? 1 : 0;
     flip[c] = (open && keep_file_majority) ? agreement[c] < 0 : divergence[c] < 0;
   }
@@ -1480,8 +1480,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     std::vector<double> level_sum(pieces, 0.0);  // the mean's sign: sum_i a_i level_i
     for (std::size_t i = 0; i < n; ++i) level_sum[component[i]] += areas[i] * level[i];
     for (std::size_t c = 0; c < pieces; ++c) {
-      const bool open = flux[c].norm() >= kOpenPieceFlux * area[c];
-      if (open && level_sum[c] < 0.0) {
+      if (is_open(flux, c) && level_sum[c] < 0.0) {
         flip[c] = flip[c] != 0 ? 0 : 1;
         ++report.open_level_flipped;
       }

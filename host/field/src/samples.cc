@@ -600,8 +600,9 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
 namespace {
 
 constexpr double kMaxMoveNoise = 2.5;
-constexpr double kMoveDiscrepancy = 1.4;  // SmoothNoisyPositions' discrepancy bound, x the noise
-constexpr double kShapeGrowth2 = 4.0;     // the squared growth of a shape's residual, 16 -> 48 neighbours
+constexpr std::size_t kMinNeighbours = 8;  // MeasurePositionNoise's and SmoothNoisyPositions' least `neighbours`
+constexpr double kMoveDiscrepancy = 1.4;   // SmoothNoisyPositions' discrepancy bound, x the noise
+constexpr double kShapeGrowth2 = 4.0;      // the squared growth of a shape's residual, 16 -> 48 neighbours
 // The bisector move (SmoothNoisyPositions). Its neighbourhood is chosen per sample among the
 // 16, 32 and 64 nearest by the intersection of confidence intervals (Katkovnik's LPA-ICI): the
 // mean over the larger neighbourhood is taken while its interval, mean +- kIciWidth x noise /
@@ -717,7 +718,6 @@ void BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eig
 
 NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours) {
-  constexpr std::size_t kMinNeighbours = 8;
   if (positions.size() <= neighbours || normals.size() != positions.size() || neighbours < kMinNeighbours) return {};
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
@@ -727,7 +727,6 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
                                     double threshold, int passes, bool fitted_normals) {
-  constexpr std::size_t kMinNeighbours = 8;
   const std::size_t n = positions.size();
   if (n <= neighbours || normals.size() != n || neighbours < kMinNeighbours) return {};
   const detail::PointCloud cloud{&positions};
