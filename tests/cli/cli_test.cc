@@ -450,6 +450,14 @@ TEST_F(Cli, NoisyDenseBarePositionsAreThinnedToTheGridBeforeTheirNormalsAreEstim
   ExpectNoFarWrongAndMeanBelow(Palpa("eval " + Path("noisy_bare.palpa") + " --mesh " + mesh + " --json"), 0.2);
 }
 
+// 5,000 samples of `mesh` (`palpa sample --seed 3`, written to `sampled`) as a bare scan: no
+// normals, and Gaussian noise of 0.3 voxel at 150 cells per axis (BareText, seed 3).
+std::string NoisyBareText(const std::string& mesh, const std::string& sampled) {
+  EXPECT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + sampled + " -q").code, 0);
+  const std::vector<std::array<double, 3>> points = SampledPositions(sampled);
+  return BareText(points, 0.3 * VoxelAt150Cells(points), 3);
+}
+
 // Issue 20: bare samples of a part with blades thinner than the spacing and a little position
 // noise are called noisy (the two sides no longer fit two clean sheets), and the spanning tree
 // alone oriented them across the blades: CGAL's rotor, 5,000 samples with 0.3 voxels of noise,
@@ -457,10 +465,7 @@ TEST_F(Cli, NoisyDenseBarePositionsAreThinnedToTheGridBeforeTheirNormalsAreEstim
 // noisy sets too (normals.cc, kSheetPassNoise).
 TEST_F(Cli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/rotor.off";
-  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + Path("rotor.xyz") + " -q").code, 0);
-  const std::vector<std::array<double, 3>> points = SampledPositions(Path("rotor.xyz"));
-  const double voxel = VoxelAt150Cells(points);
-  const std::string input = Write("noisy_rotor.xyz", BareText(points, 0.3 * voxel, 3));
+  const std::string input = Write("noisy_rotor.xyz", NoisyBareText(mesh, Path("rotor.xyz")));
   const Outcome b = Palpa("build " + input + " -o " + Path("noisy_rotor.palpa") + " --cells 150");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("jet fit, 18 neighbours)"), std::string::npos) << b.out;  // called noisy
@@ -477,10 +482,7 @@ TEST_F(Cli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
 // voxel of noise per axis: band mean 0.251 -> 0.157 voxel, wrong sign 3.82 -> 3.02 %.
 TEST_F(Cli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/joint.off";
-  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + Path("joint.xyz") + " -q").code, 0);
-  const std::vector<std::array<double, 3>> points = SampledPositions(Path("joint.xyz"));
-  const double voxel = VoxelAt150Cells(points);
-  const std::string input = Write("noisy_joint.xyz", BareText(points, 0.3 * voxel, 3));
+  const std::string input = Write("noisy_joint.xyz", NoisyBareText(mesh, Path("joint.xyz")));
   const Outcome b = Palpa("build " + input + " -o " + Path("noisy_joint.palpa") + " --cells 150 --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("their normals were fitted again as noisy ones, to the 18 nearest"), std::string::npos) << b.out;
@@ -503,10 +505,7 @@ TEST_F(Cli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
 // 5.57 -> 3.89 %, no far-wrong node either way.
 TEST_F(Cli, BareNoisySamplesAreNotMovedFartherThanTheirNoise) {
   const std::string mesh = std::string(PALPA_DATA_DIR) + "/pinion.off";
-  ASSERT_EQ(Palpa("sample " + mesh + " -n 5000 --seed 3 -o " + Path("pinion.xyz") + " -q").code, 0);
-  const std::vector<std::array<double, 3>> points = SampledPositions(Path("pinion.xyz"));
-  const double voxel = VoxelAt150Cells(points);
-  const std::string input = Write("noisy_pinion.xyz", BareText(points, 0.3 * voxel, 3));
+  const std::string input = Write("noisy_pinion.xyz", NoisyBareText(mesh, Path("pinion.xyz")));
   const Outcome b = Palpa("build " + input + " -o " + Path("noisy_pinion.palpa") + " --cells 150 --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("more than that noise explains"), std::string::npos) << b.out;
