@@ -1596,3 +1596,53 @@ TEST(SmoothNoisyPositions, KeepsTheEdgesOfANoisyCubeSharp) {
 
 }  // namespace
 }  // namespace palpa::field
+
+// --- RefitNoisyNormalLines (issue 20: noisy for the grid, clean for the spacing) ----------------
+
+namespace palpa::field {
+namespace {
+
+// Mean angle (degrees) between the lines and a sphere's radial lines.
+double MeanRadialAngleDeg(const std::vector<V3>& positions, const std::vector<V3>& normals) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    sum += std::acos(std::min(1.0, std::abs(normals[i].dot(positions[i].normalized())))) * 180.0 / std::numbers::pi;
+  return sum / static_cast<double>(positions.size());
+}
+
+TEST(RefitNoisyNormalLines, FitsLinesAgainWhereTheNoiseExceedsTheThreshold) {
+  Oriented sphere = Sphere(8000, 1.0);  // spacing ~0.04
+  const double sigma = 0.0025;          // clean for that spacing (EstimateNormalLines' figure)
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  for (V3& p : sphere.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  std::vector<V3> normals;
+  NormalsReport report;
+  report.neighbours = EstimateNormalLines(sphere.positions, normals, &report.noise_figure);
+  ASSERT_EQ(report.neighbours, kCleanNormalNeighbours) << report.noise_figure;
+  // Signs as an orientation would leave them, except a few flipped to see that each keeps its own.
+  for (std::size_t i = 0; i < normals.size(); ++i)
+    if ((normals[i].dot(sphere.positions[i]) < 0) != (i % 7 == 0)) normals[i] = -normals[i];
+  const std::vector<V3> clean_lines = normals;
+
+  NormalsReport above = report;
+  std::vector<V3> refitted = normals;
+  ASSERT_TRUE(RefitNoisyNormalLines(sphere.positions, refitted, above, 0.5 * sigma, 48));
+  EXPECT_GT(above.neighbours, kCleanNormalNeighbours);
+  for (std::size_t i = 0; i < normals.size(); ++i) ASSERT_GT(refitted[i].dot(clean_lines[i]), 0.0) << i;
+  // The wider fit averages the noise the 10-sample one carries.
+  const double clean_deg = MeanRadialAngleDeg(sphere.positions, clean_lines);
+  const double refit_deg = MeanRadialAngleDeg(sphere.positions, refitted);
+  EXPECT_LT(refit_deg, 0.8 * clean_deg) << clean_deg;
+
+  // Below the threshold, or lines already fitted as noisy: nothing changes.
+  NormalsReport below = report;
+  std::vector<V3> kept = normals;
+  EXPECT_FALSE(RefitNoisyNormalLines(sphere.positions, kept, below, 2.0 * sigma, 48));
+  EXPECT_EQ(kept, clean_lines);
+  EXPECT_EQ(below.neighbours, kCleanNormalNeighbours);
+  EXPECT_FALSE(RefitNoisyNormalLines(sphere.positions, refitted, above, 0.5 * sigma, 48));
+}
+
+}  // namespace
+}  // namespace palpa::field

@@ -176,23 +176,12 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode != field::NormalsMode::kKeep) {
     field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
                          normals_report, normals_mode == field::NormalsMode::kEstimate);
-    // Samples clean for their spacing can be noisy for the grid: --denoise auto below then moves
-    // them along their lines, and 10-sample lines carry the noise into the moves (joint, 5,000 bare
-    // samples with 0.3 voxel of noise, seed 1: band mean 0.248 -> 0.145 voxel with the noisy fit). The
-    // denoiser's measure and threshold on the provisional voxel; the lines the clean fit oriented
-    // keep their signs.
-    bool refit = false;
-    if (normals_mode == field::NormalsMode::kEstimate && normals_report.neighbours == field::kCleanNormalNeighbours &&
-        args.denoise == "auto" && provisional_voxel > 0) {
-      const double threshold = kDenoiseVoxels * provisional_voxel;
-      if (field::MeasurePositionNoise(points->positions, points->normals, kDenoiseNeighbours).noise > threshold) {
-        std::vector<Eigen::Vector3d> lines;
-        normals_report.neighbours = field::EstimateNormalLines(points->positions, lines, nullptr, true);
-        for (std::size_t i = 0; i < lines.size(); ++i)
-          points->normals[i] = lines[i].dot(points->normals[i]) < 0 ? Eigen::Vector3d(-lines[i]) : lines[i];
-        refit = true;
-      }
-    }
+    // Samples clean for their spacing can be noisy for the grid, and --denoise auto below moves them
+    // along their lines: the denoiser's measure and threshold, on the provisional voxel.
+    const bool refit = normals_mode == field::NormalsMode::kEstimate && args.denoise == "auto" &&
+                       provisional_voxel > 0 &&
+                       field::RefitNoisyNormalLines(points->positions, points->normals, normals_report,
+                                                    kDenoiseVoxels * provisional_voxel, kDenoiseNeighbours);
     if (normals_mode == field::NormalsMode::kEstimate)
       field::RefineNormalLines(points->positions, points->normals, normals_report.neighbours);
     if (refit && !args.quiet)

@@ -18,6 +18,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "palpa/field/samples.h"
 #include "palpa/field/winding.h"
 #include "point_cloud.h"
 
@@ -1544,6 +1545,16 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   report.flipped = 0;
   for (std::size_t i = 0; i < n; ++i)  // `given` is `normals`: the file's is +-oriented[i] by keep[i]
     if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;
+}
+
+bool RefitNoisyNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, NormalsReport& report,
+                           double noise_threshold, std::size_t noise_neighbours) {
+  if (report.neighbours != kCleanNormalNeighbours || normals.size() != positions.size()) return false;
+  if (!(MeasurePositionNoise(positions, normals, noise_neighbours).noise > noise_threshold)) return false;
+  std::vector<V3> lines;
+  report.neighbours = EstimateNormalLines(positions, lines, nullptr, true);
+  for (std::size_t i = 0; i < lines.size(); ++i) normals[i] = lines[i].dot(normals[i]) < 0 ? V3(-lines[i]) : lines[i];
+  return true;
 }
 
 }  // namespace palpa::field
