@@ -78,11 +78,14 @@ mesh::EvalResult Score(const Case& c, const mesh::Truth& truth, const char* what
   return r;
 }
 
-// Replaces the normals as `palpa build --normals estimate` does: jet lines, oriented, refined.
-NormalsReport EstimateAsBuildDoes(PointSet& points) {
+// Replaces the normals as `palpa build --normals estimate` does: jet lines, oriented, fitted again
+// as noisy when the position noise is over a quarter of `voxel` (> 0; --denoise auto's measure over
+// 48 neighbours), refined.
+NormalsReport EstimateAsBuildDoes(PointSet& points, double voxel = 0) {
   NormalsReport report;
   report.neighbours = EstimateNormalLines(points.positions, points.normals);
   OrientNormals(points.positions, points.normals, false, report, true);
+  if (voxel > 0) RefitNoisyNormalLines(points.positions, points.normals, report, 0.25 * voxel, 48);
   RefineNormalLines(points.positions, points.normals, report.neighbours);
   return report;
 }
@@ -236,11 +239,7 @@ TEST(SmoothNoisyPositionsOnAPart, FittedLinesMovesLargerThanTheNoiseAreUndone) {
   std::mt19937_64 rng(3);
   std::normal_distribution<double> gauss(0.0, 0.3 * voxel);
   for (Eigen::Vector3d& p : points.positions) p += Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
-  NormalsReport report;
-  report.neighbours = EstimateNormalLines(points.positions, points.normals);
-  OrientNormals(points.positions, points.normals, false, report, true);
-  RefitNoisyNormalLines(points.positions, points.normals, report, 0.25 * voxel, 48);
-  RefineNormalLines(points.positions, points.normals, report.neighbours);
+  EstimateAsBuildDoes(points, voxel);
 
   const mesh::ExactMeshDistance truth(*m);
   const auto rms_off = [&](const std::vector<Eigen::Vector3d>& positions) {
