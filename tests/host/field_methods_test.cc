@@ -80,12 +80,13 @@ mesh::EvalResult Score(const Case& c, const mesh::Truth& truth, const char* what
 
 // Replaces the normals as `palpa build --normals estimate` does: jet lines, oriented, fitted again
 // as noisy when the position noise is over a quarter of `voxel` (> 0; --denoise auto's measure over
-// 48 neighbours), refined.
+// kDenoiseNeighbours), refined.
 NormalsReport EstimateAsBuildDoes(PointSet& points, double voxel = 0) {
   NormalsReport report;
   report.neighbours = EstimateNormalLines(points.positions, points.normals);
   OrientNormals(points.positions, points.normals, false, report, true);
-  if (voxel > 0) RefitNoisyNormalLines(points.positions, points.normals, report, 0.25 * voxel, 48);
+  if (voxel > 0)
+    RefitNoisyNormalLines(points.positions, points.normals, report, kDenoiseVoxels * voxel, kDenoiseNeighbours);
   RefineNormalLines(points.positions, points.normals, report.neighbours);
   return report;
 }
@@ -249,7 +250,8 @@ TEST(SmoothNoisyPositionsOnAPart, FittedLinesMovesLargerThanTheNoiseAreUndone) {
   };
   const std::vector<Eigen::Vector3d> noisy = points.positions;
   std::vector<Eigen::Vector3d> moved = noisy;
-  const NoiseSmoothing given = SmoothNoisyPositions(moved, points.normals, 48, 0.25 * voxel, kMovePasses, false);
+  const NoiseSmoothing given =
+      SmoothNoisyPositions(moved, points.normals, kDenoiseNeighbours, kDenoiseVoxels * voxel, kMovePasses, false);
   ASSERT_TRUE(given.Applied());
   EXPECT_GT(given.rms_move, 1.4 * given.noise);
   EXPECT_GT(rms_off(moved), rms_off(noisy));  // the moves the rule undoes were doing harm
@@ -258,7 +260,8 @@ TEST(SmoothNoisyPositionsOnAPart, FittedLinesMovesLargerThanTheNoiseAreUndone) {
               rms_off(moved));
 
   std::vector<Eigen::Vector3d> kept = noisy;
-  const NoiseSmoothing fitted = SmoothNoisyPositions(kept, points.normals, 48, 0.25 * voxel, kMovePasses, true);
+  const NoiseSmoothing fitted =
+      SmoothNoisyPositions(kept, points.normals, kDenoiseNeighbours, kDenoiseVoxels * voxel, kMovePasses, true);
   EXPECT_TRUE(fitted.withheld);
   EXPECT_FALSE(fitted.Applied());
   EXPECT_EQ(fitted.rms_move, given.rms_move);

@@ -76,10 +76,6 @@ double ProvisionalVoxel(const field::PointSet& points, const BuildArgs& args) {
 
 // As field::BuildField's minimum.
 constexpr std::size_t kMinUsableSamples = 4;
-// --denoise auto (issue 20): the noise measure's wider fit (SmoothNoisyPositions); the samples
-// then move by their kMoveFewestNeighbours-kMoveMostNeighbours nearest (docs/field-methods.md § Noise).
-constexpr std::size_t kDenoiseNeighbours = 48;
-constexpr double kDenoiseVoxels = 0.25;
 
 }  // namespace
 
@@ -178,10 +174,10 @@ int RunBuild(const BuildArgs& args) {
                          normals_report, normals_mode == field::NormalsMode::kEstimate);
     // Samples clean for their spacing can be noisy for the grid, and --denoise auto below moves them
     // along their lines: the denoiser's measure and threshold, on the provisional voxel.
-    const bool refit = normals_mode == field::NormalsMode::kEstimate && args.denoise == "auto" &&
-                       provisional_voxel > 0 &&
-                       field::RefitNoisyNormalLines(points->positions, points->normals, normals_report,
-                                                    kDenoiseVoxels * provisional_voxel, kDenoiseNeighbours);
+    const bool refit =
+        normals_mode == field::NormalsMode::kEstimate && args.denoise == "auto" && provisional_voxel > 0 &&
+        field::RefitNoisyNormalLines(points->positions, points->normals, normals_report,
+                                     field::kDenoiseVoxels * provisional_voxel, field::kDenoiseNeighbours);
     if (normals_mode == field::NormalsMode::kEstimate)
       field::RefineNormalLines(points->positions, points->normals, normals_report.neighbours);
     if (refit && !args.quiet)
@@ -189,7 +185,7 @@ int RunBuild(const BuildArgs& args) {
                  "palpa build: note: {}: the samples are clean for their spacing but their position noise is over "
                  "{} voxel: their normals were fitted again as noisy ones, to the {} nearest (--denoise off keeps "
                  "the clean fit)\n",
-                 args.points, kDenoiseVoxels, normals_report.neighbours);
+                 args.points, field::kDenoiseVoxels, normals_report.neighbours);
     if (!args.quiet || !points->has_normals)
       fmt::print(stderr, "palpa build: note: {}: {}{}\n", args.points, normals_report.Describe(),
                  points->has_normals      ? ""
@@ -268,9 +264,9 @@ int RunBuild(const BuildArgs& args) {
   if (args.denoise == "auto") {
     if (auto grid = field::MakeGrid(device.positions, options.grid)) {
       const double h = grid->voxel_m;
-      const field::NoiseSmoothing smoothed =
-          field::SmoothNoisyPositions(device.positions, device.normals, kDenoiseNeighbours, kDenoiseVoxels * h,
-                                      field::kMovePasses, normals_mode == field::NormalsMode::kEstimate);
+      const field::NoiseSmoothing smoothed = field::SmoothNoisyPositions(
+          device.positions, device.normals, field::kDenoiseNeighbours, field::kDenoiseVoxels * h, field::kMovePasses,
+          normals_mode == field::NormalsMode::kEstimate);
       // What the moves leave is noise at the sample spacing: one binomial filter of the field
       // averages it (bull, sigma = 1 voxel, the 16-sample move: band mean 0.289 -> 0.271, wrong
       // sign 4.82 -> 4.23 %).

@@ -158,6 +158,13 @@ inline constexpr std::size_t kMoveFewestNeighbours = 16;
 inline constexpr std::size_t kMoveMostNeighbours = 64;
 inline constexpr int kMovePasses = 3;
 
+/// `palpa build --denoise auto` (issue 20): the noise measure's wider fit (the `neighbours` of
+/// MeasurePositionNoise and SmoothNoisyPositions) and the threshold, in voxels of the grid, above
+/// which the samples move (clean samples, sparse or faceted ones included, measure below 0.21
+/// voxel; docs/field-methods.md § Noise). Also the threshold of RefitNoisyNormalLines.
+inline constexpr std::size_t kDenoiseNeighbours = 48;
+inline constexpr double kDenoiseVoxels = 0.25;
+
 /// What SmoothNoisyPositions found and did.
 struct NoiseSmoothing {
   double noise = 0;       ///< the position noise (RMS, units of the positions): the residual's part that
