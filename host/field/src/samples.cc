@@ -601,7 +601,6 @@ namespace {
 
 constexpr double kMaxMoveNoise = 2.5;
 constexpr std::size_t kMinNeighbours = 8;  // MeasurePositionNoise's and SmoothNoisyPositions' least `neighbours`
-constexpr double kMoveDiscrepancy = 1.4;   // SmoothNoisyPositions' discrepancy bound, x the noise
 constexpr double kShapeGrowth2 = 4.0;      // the squared growth of a shape's residual, 16 -> 48 neighbours
 // The bisector move (SmoothNoisyPositions). Its neighbourhood is chosen per sample among the
 // 16, 32 and 64 nearest by the intersection of confidence intervals (Katkovnik's LPA-ICI): the

@@ -157,6 +157,9 @@ Simplification SimplifyBarePositions(PointSet& points, double voxel);
 inline constexpr std::size_t kMoveFewestNeighbours = 16;
 inline constexpr std::size_t kMoveMostNeighbours = 64;
 inline constexpr int kMovePasses = 3;
+/// SmoothNoisyPositions' discrepancy bound: with fitted normals, moves whose RMS exceeds this x the
+/// measured noise are undone (docs/field-methods.md § Moves larger than the noise).
+inline constexpr double kMoveDiscrepancy = 1.4;
 
 /// `palpa build --denoise auto` (issue 20): the noise measure's wider fit (the `neighbours` of
 /// MeasurePositionNoise and SmoothNoisyPositions) and the threshold, in voxels of the grid, above
@@ -206,7 +209,7 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 /// bilateral_smooth_point_set shrinks curved parts). It needs the normals' direction: 15-degree
 /// normal noise costs it about as much as it gains (docs/field-methods.md § Noise). With
 /// `fitted_normals` (normals estimated from these positions) the moves must look like the noise
-/// they remove: when their RMS over all samples exceeds 1.4 x `noise`, the lines were fitted
+/// they remove: when their RMS over all samples exceeds kMoveDiscrepancy x `noise`, the lines were fitted
 /// across the shape (bare samples of creases and walls as fine as the neighbourhoods) and every
 /// position is restored (`withheld`; the discrepancy principle, docs/field-methods.md § Moves
 /// larger than the noise). Normals are kept. Shapes: positions and normals of equal length, normals unit; fewer than
