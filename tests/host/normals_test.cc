@@ -19,6 +19,7 @@
 
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
+#include "palpa/field/winding.h"
 #include "test_util.h"
 
 namespace palpa::field {
@@ -439,6 +440,55 @@ Oriented CubeWithFin() {
         shape.normals.emplace_back(0, 0, side);
       }
   return shape;
+}
+
+TEST(SheetDipoles, TheTreeSumMatchesEverySampleSummedAtProbesNearAndFar) {
+  // A cap of 2,000 samples (z > 0.2 on a unit sphere of 4,000) as the sheet, probed from every
+  // sample of the sphere at half a spacing along its normal: on the cap, beside it and across the
+  // sphere. The reference sums the smoothed dipoles one by one (the formula in normals.h).
+  const Oriented sphere = Sphere(4000, 1.0);
+  const std::size_t n = sphere.positions.size();
+  const double spacing = std::sqrt(4.0 * std::numbers::pi / static_cast<double>(n));
+  const std::vector<double> areas(n, 4.0 * std::numbers::pi / static_cast<double>(n));
+  std::vector<std::uint32_t> sheet;
+  for (std::size_t i = 0; i < n; ++i)
+    if (sphere.positions[i].z() > 0.2) sheet.push_back(static_cast<std::uint32_t>(i));
+  ASSERT_GT(sheet.size(), 1500u);
+  const SheetDipoles tree(sheet, sphere.positions, sphere.normals, areas);
+  const double offset = 0.5 * spacing;
+  double worst = 0.0;
+  std::size_t exact = 0, far = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const V3 q_in = sphere.positions[k] - offset * sphere.normals[k];
+    const V3 q_out = sphere.positions[k] + offset * sphere.normals[k];
+    double in = 0.0, out = 0.0;
+    bool own = false;
+    for (const std::uint32_t j : sheet) {
+      const double a = areas[j];
+      if (j == k) {
+        own = true;
+        in += SampleProbes::OwnDisc(a, offset);
+        out -= SampleProbes::OwnDisc(a, offset);
+        continue;
+      }
+      for (const bool inside : {true, false}) {
+        const V3 d = sphere.positions[j] - (inside ? q_in : q_out);
+        const double r2 = d.squaredNorm() + a / std::numbers::pi;
+        (inside ? in : out) += a * sphere.normals[j].dot(d) / (4.0 * std::numbers::pi * r2 * std::sqrt(r2));
+      }
+    }
+    const SheetDipoles::Terms t = tree.At(k, offset);
+    EXPECT_EQ(t.own, own) << k;
+    worst = std::max({worst, std::abs(t.in - in), std::abs(t.out - out)});
+    exact += t.exact;
+    far += t.far;
+  }
+  // Measured: 0.0092 at most (the cap's top, where ~50 clusters at 3-4 radii each read a few
+  // hundredths low), against w of 0.7 inside and -0.1 outside there; 4.4 % of the pairs summed
+  // one by one, ~29 clusters a probe. A cluster summed wrongly, or not at all, misses by more.
+  EXPECT_LT(worst, 0.012);
+  EXPECT_GT(far, 20 * n);
+  EXPECT_LT(static_cast<double>(exact), 0.06 * static_cast<double>(n) * static_cast<double>(sheet.size()));
 }
 
 TEST(FlipSheetsByWinding, TheSideOfAThinFinThatTookTheOtherSidesSignIsTurned) {

@@ -29,6 +29,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -170,6 +171,51 @@ void RefineNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vecto
 std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                               const std::vector<std::uint8_t>& eligible, std::size_t& parts);
 
+/// The smoothed-disc winding number of one sheet of FlipSheetsByWinding at a sample's two probes,
+/// summed through a tree of the sheet's dipoles (all of the sheet's current sign, +1): each
+/// sample j contributes a_j n_j . (P_j - q) / (4 pi (|P_j - q|^2 + a_j / pi)^(3/2)), the sample k
+/// itself, when it is one of the sheet's, its disc (SampleProbes::OwnDisc, +- at the two probes).
+/// The sheet is split at the median of its box's longest axis down to leaves of kLeaf samples; a
+/// cluster of radius r about its area-weighted centre c, seen from probes farther than kFarField r,
+/// counts as one dipole of moment sum_j a_j n_j at c, smoothed over the cluster's mean disc
+/// (Barill, Dickson, Schmidt, Levin, Jacobson 2018, Fast Winding Numbers for Soups and Clouds,
+/// §3.2's criterion, with the zeroth-order term only: the first-order term did not lower the
+/// error on a sphere cap at kFarField 3, tests/host/normals_test.cc). Exact sums cost probes x
+/// samples, which on dense bare scans made the sheet pass most of a build (docs/field-methods.md §
+/// Bare dense sets). Units: those of `positions`; `positions`, `normals` (unit) and `areas` are
+/// the whole set's, indexed by `samples`, and must outlive the tree. Deterministic.
+class SheetDipoles {
+ public:
+  static constexpr std::uint32_t kLeaf = 16;
+  static constexpr double kFarField = 3.0;
+
+  SheetDipoles(std::span<const std::uint32_t> samples, const std::vector<Eigen::Vector3d>& positions,
+               const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& areas);
+
+  struct Terms {
+    double in = 0.0, out = 0.0;  ///< w at P_k - offset n_k and at P_k + offset n_k
+    bool own = false;            ///< sample k is one of the sheet's
+    std::size_t exact = 0;       ///< samples summed one by one
+    std::size_t far = 0;         ///< clusters summed as one dipole
+  };
+  /// The sheet's terms at sample k's probes, `offset` from P_k along n_k (> 0, SampleProbes::offsets).
+  Terms At(std::size_t k, double offset) const;
+
+ private:
+  struct Node {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero(), moment = Eigen::Vector3d::Zero();
+    double area = 0.0, radius = 0.0;
+    std::uint32_t begin = 0, end = 0;
+    std::int32_t left = -1, right = -1;
+  };
+  std::int32_t Build(std::uint32_t begin, std::uint32_t end);
+  std::vector<std::uint32_t> order_;
+  std::vector<Node> nodes_;
+  const std::vector<Eigen::Vector3d>& positions_;
+  const std::vector<Eigen::Vector3d>& normals_;
+  const std::vector<double>& areas_;
+};
+
 /// Turns the sheets whose sign disagrees with the winding number w of all the samples (winding.h):
 /// the sides of walls thinner than the sample spacing (ears, horns, fins) that an orientation gave
 /// one sign, which FlipInvertedParts' level cannot see (its probes cross both sides). A sheet is
@@ -183,7 +229,8 @@ std::size_t FlipInvertedParts(const std::vector<Eigen::Vector3d>& positions, std
 /// and swaps its samples' targets. Sheets of at most 4,096 samples and n / 8 whose flip lowers
 /// the energy (measured on the probes within twice their radius plus 6 d_i) flip, best first,
 /// apart from one another, round after round until no flip lowers it (each sheet at most once; a
-/// round re-scores only the sheets a flip reached). Then a second pass with a finer cut (15
+/// round re-scores only the sheets a flip reached; a sheet of more than 256 samples is scored
+/// through SheetDipoles, its flip applied with exact sums). Then a second pass with a finer cut (15
 /// degrees, asin(0.125), sheets of at most n / 100) for the few wrong samples the first cut had
 /// joined to right ones. OrientNormals runs it on
 /// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours), and
