@@ -51,6 +51,10 @@ def main():
     ap.add_argument("--bench-bin", required=True)
     ap.add_argument("--work", required=True)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--dense", action="store_true",
+                    help="also build 2,000,000 samples with defaults at 300 cells, once each (issue 20: <= 25x the "
+                    "kitten's 300-cell build, peak RSS <= 2 GB): knot1 oriented, and fandisk without normals "
+                    "(estimated, oriented and sheet-checked; no goal, reported beside it)")
     args = ap.parse_args()
     os.makedirs(args.work, exist_ok=True)
     load_before = os.getloadavg()
@@ -108,6 +112,22 @@ def main():
     for b in json.loads(out.stdout)["benchmarks"]:
         if b.get("aggregate_name") == "mean":
             packing[b["run_name"]] = b["real_time"] / 1e3  # ms -> s
+    # Dense scans (issue 20), one build each: sampled with `palpa sample`, the bare copy written here.
+    dense = []
+    if args.dense:
+        for mesh, bare in (("knot1", False), ("fandisk", True)):
+            points = os.path.join(args.work, f"{mesh}-2m.xyz")
+            subprocess.run([args.palpa, "sample", f"data/{mesh}.off", "-n", "2000000", "--seed", "1", "-o", points,
+                            "-q"], check=True, capture_output=True)
+            if bare:
+                with open(points) as src, open(points + ".bare.xyz", "w") as dst:
+                    for line in src:
+                        dst.write(" ".join(line.split()[:3]) + "\n")
+                os.replace(points + ".bare.xyz", points)
+            blob = os.path.join(args.work, f"{mesh}-2m.palpa")
+            wall, rss, _ = run_timed([args.palpa, "build", points, "-o", blob, "--cells", "300", "-q"])
+            dense.append((mesh, bare, wall, rss))
+            os.remove(points)
     load_after = os.getloadavg()
 
     print()
@@ -147,6 +167,14 @@ def main():
         kind, every, t = m.group(1), m.group(2) or "10", m.group(3) or "1"
         points = 50000 if every == "1" else 5000
         print(f"| {kind} | {points:,} | {t} | {seconds:.3f} s |")
+    if dense:
+        print()
+        print("| 2,000,000 samples, `palpa build` defaults, 300 cells | wall (one run) | / kitten at 300 cells "
+              "| peak RSS |")
+        print("|---|---|---|---|")
+        for mesh, bare, wall, rss in dense:
+            what = f"{mesh}, {'no normals' if bare else 'oriented (goal <= 25x, <= 2 GB)'}"
+            print(f"| {what} | {wall:.1f} s | {wall / rows[300]['wall']:.1f}x | {rss / 1e9:.2f} GB |")
     print()
     print(f"load average after: {load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f}")
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Field build speed and scale (issue 5), every figure in one run so that ratios are fair:
-#   bench/field/run.sh [BUILD_DIR]        (default build/field-bench; Release)
+#   bench/field/run.sh [BUILD_DIR [--dense]]   (default build/field-bench; Release)
 # Builds `palpa` and the field benchmarks, then runs bench/field/measure.py, which prints:
 #   - whole `palpa build data/kitten.xyz` at 150, 300, 600 and 1,200 cells: wall time and peak
 #     RSS (/usr/bin/time -v), blob size, time(600)/time(300), time(1200)/time(600);
@@ -9,11 +9,14 @@
 #   - palpa build at 300 cells with 1 and 2 TBB threads;
 #   - stage times (packing, patches, centre tests, evaluation, projection) at 150/300/600 cells;
 #   - packing (eq. 2-3) on cube.pwn: k-d tree (50,000 points; 1 and 2 threads) and brute force
-#     on 5,000 points.
+#     on 5,000 points;
+#   - with --dense: 2,000,000 samples at 300 cells, knot1 oriented and fandisk without normals,
+#     wall, peak RSS and the ratio to the kitten's 300-cell build (issue 20).
 # The load average before and after is printed: compare ratios, and rerun when it is high.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 build=${1:-build/field-bench}
+shift || true
 
 cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$build" --target palpa >/dev/null
@@ -26,4 +29,4 @@ else
   bench_bin="$build/bench-field"
 fi
 exec /usr/bin/python3 bench/field/measure.py --palpa "$build/host/cli/palpa" --bench-bin "$bench_bin" \
-  --work "$build/bench-field-out"
+  --work "$build/bench-field-out" "$@"
