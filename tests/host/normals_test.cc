@@ -443,7 +443,7 @@ Oriented CubeWithFin() {
 }
 
 TEST(SheetDipoles, TheTreeSumMatchesEverySampleSummedAtProbesNearAndFar) {
-  // A cap of 2,000 samples (z > 0.2 on a unit sphere of 4,000) as the sheet, probed from every
+  // A cap of about 1,600 samples (z > 0.2 on a unit sphere of 4,000) as the sheet, probed from every
   // sample of the sphere at half a spacing along its normal: on the cap, beside it and across the
   // sphere. The reference sums the smoothed dipoles one by one (the formula in normals.h).
   const Oriented sphere = Sphere(4000, 1.0);

@@ -1009,6 +1009,22 @@ double SmoothedDipole(const V3& p, double a, const V3& n, const V3& q) {
   return a * n.dot(d) / (4.0 * std::numbers::pi * r2 * std::sqrt(r2));
 }
 
+// Sample j's share, of sign s (+-1), of a sheet's w at sample k's probes q_in and q_out (`offset`
+// from P_k): its smoothed dipole, or its disc when j is k (SampleProbes::OwnDisc).
+void AddSampleTerms(SheetDipoles::Terms& t, std::uint32_t j, std::size_t k, double s, double offset, const V3& q_in,
+                    const V3& q_out, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                    const std::vector<double>& areas) {
+  if (j == k) {
+    const double own = SampleProbes::OwnDisc(areas[j], offset);
+    t.in += s * own;
+    t.out += s * -own;
+    t.own = true;
+    return;
+  }
+  t.in += s * SmoothedDipole(positions[j], areas[j], normals[j], q_in);
+  t.out += s * SmoothedDipole(positions[j], areas[j], normals[j], q_out);
+}
+
 // The positions' k-d tree (leaves of 10) and kSheetGraph-nearest graph, which every pass of
 // FlipSheetsByWinding reads: they depend on the positions only.
 struct SheetNeighbours {
@@ -1138,26 +1154,13 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   std::vector<std::int8_t> side(n, 1);
   // w_Q at both of sample k's probes, in one pass over the sheet, and whether k is one of the
   // sheet's own samples.
-  struct BothTerms {
-    double in = 0, out = 0;
-    bool own = false;
-  };
+  using BothTerms = SheetDipoles::Terms;
   const auto sheet_terms = [&](const Sheet& sheet, std::size_t k) {
     const V3 q_in = positions[k] - offsets[k] * normals[k];
     const V3 q_out = positions[k] + offsets[k] * normals[k];
     BothTerms t;
-    for (const std::uint32_t j : sheet.samples) {
-      const double s = side[j];
-      if (j == k) {
-        const double own = SampleProbes::OwnDisc(areas[j], offsets[j]);
-        t.in += s * own;
-        t.out += s * -own;
-        t.own = true;
-        continue;
-      }
-      t.in += s * SmoothedDipole(positions[j], areas[j], normals[j], q_in);
-      t.out += s * SmoothedDipole(positions[j], areas[j], normals[j], q_out);
-    }
+    for (const std::uint32_t j : sheet.samples)
+      AddSampleTerms(t, j, k, side[j], offsets[k], q_in, q_out, positions, normals, areas);
     return t;
   };
   std::size_t flipped = 0;
@@ -1367,19 +1370,9 @@ SheetDipoles::Terms SheetDipoles::At(std::size_t k, double offset) const {
       continue;
     }
     if (node.left < 0) {
-      for (std::uint32_t m = node.begin; m < node.end; ++m) {
-        const std::uint32_t j = order_[m];
-        ++t.exact;
-        if (j == k) {
-          const double own = SampleProbes::OwnDisc(areas_[j], offset);
-          t.in += own;
-          t.out -= own;
-          t.own = true;
-          continue;
-        }
-        t.in += SmoothedDipole(positions_[j], areas_[j], normals_[j], q_in);
-        t.out += SmoothedDipole(positions_[j], areas_[j], normals_[j], q_out);
-      }
+      for (std::uint32_t m = node.begin; m < node.end; ++m)
+        AddSampleTerms(t, order_[m], k, 1.0, offset, q_in, q_out, positions_, normals_, areas_);
+      t.exact += node.end - node.begin;
       continue;
     }
     stack[top++] = static_cast<std::uint32_t>(node.right);
