@@ -458,18 +458,34 @@ std::string NoisyBareText(const std::string& mesh, const std::string& sampled) {
   return BareText(points, 0.3 * VoxelAt150Cells(points), 3);
 }
 
+// Cli with one bundled mesh's NoisyBareText built at 150 cells and scored against the mesh.
+class NoisyBareCli : public Cli {
+ protected:
+  struct Scored {
+    Outcome build;
+    Outcome eval;  // `palpa eval --json`, run only when the build exited 0
+  };
+  // data/`name`.off as NoisyBareText (written to noisy_`name`.xyz), built to noisy_`name`.palpa
+  // with `--cells 150` and `options`.
+  Scored BuildAndScore(const std::string& name, const std::string& options = "") {
+    const std::string mesh = std::string(PALPA_DATA_DIR) + "/" + name + ".off";
+    const std::string input = Write("noisy_" + name + ".xyz", NoisyBareText(mesh, Path(name + ".xyz")));
+    const std::string field = Path("noisy_" + name + ".palpa");
+    Scored out{Palpa("build " + input + " -o " + field + " --cells 150" + options), {}};
+    if (out.build.code == 0) out.eval = Palpa("eval " + field + " --mesh " + mesh + " --json");
+    return out;
+  }
+};
+
 // Issue 20: bare samples of a part with blades thinner than the spacing and a little position
 // noise are called noisy (the two sides no longer fit two clean sheets), and the spanning tree
 // alone oriented them across the blades: CGAL's rotor, 5,000 samples with 0.3 voxels of noise,
 // 31 % of the band wrong and ~148,000 far-wrong nodes. The sheet pass now runs on such mildly
 // noisy sets too (normals.cc, kSheetPassNoise).
-TEST_F(Cli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
-  const std::string mesh = std::string(PALPA_DATA_DIR) + "/rotor.off";
-  const std::string input = Write("noisy_rotor.xyz", NoisyBareText(mesh, Path("rotor.xyz")));
-  const Outcome b = Palpa("build " + input + " -o " + Path("noisy_rotor.palpa") + " --cells 150");
+TEST_F(NoisyBareCli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
+  const auto [b, e] = BuildAndScore("rotor");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("jet fit, 18 neighbours)"), std::string::npos) << b.out;  // called noisy
-  const Outcome e = Palpa("eval " + Path("noisy_rotor.palpa") + " --mesh " + mesh + " --json");
   ASSERT_EQ(e.code, 0) << e.out;
   EXPECT_LT(EvalFigure(e, "\"far_wrong\":"), 10000.0) << e.out;
   EXPECT_LT(EvalFigure(e, "\"wrong_sign_in_band_percent\":"), 20.0) << e.out;
@@ -480,19 +496,17 @@ TEST_F(Cli, MildlyNoisyBareSamplesOfThinBladesAreNotOrientedAcrossThem) {
 // the 10-sample lines carried the noise into the moves. Their normals are fitted again as noisy
 // ones (18 neighbours and up); --denoise off keeps the clean fit. The joint, 5,000 samples, 0.3
 // voxel of noise per axis: band mean 0.251 -> 0.157 voxel, wrong sign 3.82 -> 3.02 %.
-TEST_F(Cli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
-  const std::string mesh = std::string(PALPA_DATA_DIR) + "/joint.off";
-  const std::string input = Write("noisy_joint.xyz", NoisyBareText(mesh, Path("joint.xyz")));
-  const Outcome b = Palpa("build " + input + " -o " + Path("noisy_joint.palpa") + " --cells 150 --format 1");
+TEST_F(NoisyBareCli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
+  const auto [b, e] = BuildAndScore("joint", " --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("their normals were fitted again as noisy ones, to the 18 nearest"), std::string::npos) << b.out;
   EXPECT_NE(b.out.find("jet fit, 18 neighbours)"), std::string::npos) << b.out;
-  const Outcome e = Palpa("eval " + Path("noisy_joint.palpa") + " --mesh " + mesh + " --json");
   ASSERT_EQ(e.code, 0) << e.out;
   EXPECT_LT(EvalFigure(e, "\"mean_abs_error\":"), 0.19) << e.out;
   EXPECT_LT(EvalFigure(e, "\"wrong_sign_in_band_percent\":"), 3.6) << e.out;
   EXPECT_LT(EvalFigure(e, "\"far_wrong\":"), 100.0) << e.out;
-  const Outcome off = Palpa("build " + input + " -o " + Path("off.palpa") + " --cells 150 --format 1 --denoise off");
+  const Outcome off =
+      Palpa("build " + Path("noisy_joint.xyz") + " -o " + Path("off.palpa") + " --cells 150 --format 1 --denoise off");
   ASSERT_EQ(off.code, 0) << off.out;
   EXPECT_NE(off.out.find("jet fit, 10 neighbours"), std::string::npos) << off.out;
   EXPECT_EQ(off.out.find("fitted again"), std::string::npos) << off.out;
@@ -503,15 +517,12 @@ TEST_F(Cli, BareSamplesNoisyForTheGridButNotTheirSpacingTakeTheNoisyFit) {
 // do not carry the shape, 1.6 x the noise RMS, and left the samples farther from the surface. The
 // moves are undone and only the field is filtered: band mean 0.349 -> 0.236 voxel, wrong sign
 // 5.57 -> 3.89 %, no far-wrong node either way.
-TEST_F(Cli, BareNoisySamplesAreNotMovedFartherThanTheirNoise) {
-  const std::string mesh = std::string(PALPA_DATA_DIR) + "/pinion.off";
-  const std::string input = Write("noisy_pinion.xyz", NoisyBareText(mesh, Path("pinion.xyz")));
-  const Outcome b = Palpa("build " + input + " -o " + Path("noisy_pinion.palpa") + " --cells 150 --format 1");
+TEST_F(NoisyBareCli, BareNoisySamplesAreNotMovedFartherThanTheirNoise) {
+  const auto [b, e] = BuildAndScore("pinion", " --format 1");
   ASSERT_EQ(b.code, 0) << b.out;
   EXPECT_NE(b.out.find("more than that noise explains"), std::string::npos) << b.out;
   EXPECT_NE(b.out.find("the samples were kept in place and only the field filtered"), std::string::npos) << b.out;
   EXPECT_EQ(b.out.find("samples moved along their normals"), std::string::npos) << b.out;
-  const Outcome e = Palpa("eval " + Path("noisy_pinion.palpa") + " --mesh " + mesh + " --json");
   ASSERT_EQ(e.code, 0) << e.out;
   EXPECT_LT(EvalFigure(e, "\"mean_abs_error\":"), 0.28) << e.out;
   EXPECT_LT(EvalFigure(e, "\"far_wrong\":"), 100.0) << e.out;

@@ -1523,17 +1523,17 @@ TEST(SmoothNoisyPositions, MeasuresTheNoiseAndAveragesItOnASphere) {
   };
   const double before = rms_radial();
   EXPECT_NEAR(before, sigma, 0.1 * sigma);
-  const NoiseSmoothing measured = MeasurePositionNoise(sphere.positions, sphere.normals, 48);
+  const NoiseSmoothing measured = MeasurePositionNoise(sphere.positions, sphere.normals, kDenoiseNeighbours);
   EXPECT_EQ(measured.moved, 0u);
   // As if fitted: normals that follow the shape pass the moves' discrepancy check.
-  const NoiseSmoothing done =
-      SmoothNoisyPositions(sphere.positions, sphere.normals, 48, 0.5 * sigma, kMovePasses, /*fitted_normals=*/true);
+  const NoiseSmoothing done = SmoothNoisyPositions(sphere.positions, sphere.normals, kDenoiseNeighbours, 0.5 * sigma,
+                                                   kMovePasses, /*fitted_normals=*/true);
   ASSERT_TRUE(done.Applied());
   EXPECT_NEAR(done.noise, sigma, 0.2 * sigma);  // the residual of 16-neighbour quadrics, dof-corrected
   EXPECT_EQ(measured.noise, done.noise);        // the measure alone is the same measure
   EXPECT_EQ(measured.residual, done.residual);
   EXPECT_EQ(done.moved, sphere.positions.size());
-  EXPECT_LT(rms_radial(), before / 3.0);  // 48 neighbours, twice: sigma / sqrt(48) ideally
+  EXPECT_LT(rms_radial(), before / 3.0);  // kDenoiseNeighbours (48), twice: sigma / sqrt(48) ideally
   // The moves take out the noise, so their RMS is about the noise's; far beyond it they are undone.
   EXPECT_FALSE(done.withheld);
   EXPECT_NEAR(done.rms_move, sigma, 0.2 * sigma);
@@ -1542,7 +1542,7 @@ TEST(SmoothNoisyPositions, MeasuresTheNoiseAndAveragesItOnASphere) {
 TEST(SmoothNoisyPositions, LeavesCleanSamplesAlone) {
   Oriented sphere = Sphere(2000, 1.0);
   const std::vector<V3> before = sphere.positions;
-  const NoiseSmoothing done = SmoothNoisyPositions(sphere.positions, sphere.normals, 48, 1e-3);
+  const NoiseSmoothing done = SmoothNoisyPositions(sphere.positions, sphere.normals, kDenoiseNeighbours, 1e-3);
   EXPECT_FALSE(done.Applied());
   EXPECT_LT(done.noise, 1e-4);  // a sphere is a quadric to this order at 16 neighbours
   EXPECT_EQ(sphere.positions, before);
@@ -1568,10 +1568,10 @@ TEST(SmoothNoisyPositions, TellsASparseDetailedSurfaceFromNoise) {
   };
   Oriented sparse = torus(400, 8);  // spacing ~0.16 against the tube's radius 0.25; residual 0.0015, noise 0
   const std::vector<V3> before = sparse.positions;
-  const NoiseSmoothing clean = SmoothNoisyPositions(sparse.positions, sparse.normals, 48, 1e-3);
+  const NoiseSmoothing clean = SmoothNoisyPositions(sparse.positions, sparse.normals, kDenoiseNeighbours, 1e-3);
   const double threshold = 0.5 * clean.residual;  // the 16-sample residual alone would move them
   sparse.positions = before;
-  const NoiseSmoothing kept = SmoothNoisyPositions(sparse.positions, sparse.normals, 48, threshold);
+  const NoiseSmoothing kept = SmoothNoisyPositions(sparse.positions, sparse.normals, kDenoiseNeighbours, threshold);
   EXPECT_GT(kept.residual, threshold);
   EXPECT_LT(kept.noise, 0.5 * threshold) << kept.residual;
   EXPECT_FALSE(kept.Applied());
@@ -1581,7 +1581,8 @@ TEST(SmoothNoisyPositions, TellsASparseDetailedSurfaceFromNoise) {
   std::mt19937_64 rng(10);
   std::normal_distribution<double> gauss(0.0, threshold);
   for (V3& p : noisy.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
-  const NoiseSmoothing smoothed = SmoothNoisyPositions(noisy.positions, noisy.normals, 48, 0.5 * threshold);
+  const NoiseSmoothing smoothed =
+      SmoothNoisyPositions(noisy.positions, noisy.normals, kDenoiseNeighbours, 0.5 * threshold);
   EXPECT_TRUE(smoothed.Applied());
   EXPECT_NEAR(smoothed.noise, threshold, 0.25 * threshold);
 }
@@ -1608,7 +1609,8 @@ TEST(SmoothNoisyPositions, MovesSamplesOfAThinPart) {
     return std::sqrt(s / static_cast<double>(cylinder.positions.size()));
   };
   const double before = rms_radial();
-  const NoiseSmoothing done = SmoothNoisyPositions(cylinder.positions, cylinder.normals, 48, 0.5 * kSigma);
+  const NoiseSmoothing done =
+      SmoothNoisyPositions(cylinder.positions, cylinder.normals, kDenoiseNeighbours, 0.5 * kSigma);
   ASSERT_TRUE(done.Applied());
   // Measured: all 6,000 moved, radial RMS 0.00100 -> 0.00021; the 48-sample quadrics it
   // replaced moved 5,919 and left 0.00044.
@@ -1636,7 +1638,7 @@ TEST(SmoothNoisyPositions, KeepsTheEdgesOfANoisyCubeSharp) {
     return std::sqrt(s / static_cast<double>(count));
   };
   const double edge_before = rms(true), face_before = rms(false);
-  const NoiseSmoothing done = SmoothNoisyPositions(cube.positions, cube.normals, 48, 0.5 * sigma);
+  const NoiseSmoothing done = SmoothNoisyPositions(cube.positions, cube.normals, kDenoiseNeighbours, 0.5 * sigma);
   ASSERT_TRUE(done.Applied());
   // Only neighbours of the same face are fitted: a fit across the edge would round it and pull
   // the samples near it off both faces (CGAL's jet_smooth_point_set does).
