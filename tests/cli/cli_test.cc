@@ -380,6 +380,21 @@ TEST_F(Cli, SparseCowPhantomsGoWhereTheDiscSpreadWindingNumberIsClearlyOutside) 
   EXPECT_LT(EvalFigure({e.code, e.out.substr(holes)}, "\"deepest_voxels\":"), 4.0) << e.out;
 }
 
+// Issue 20: the cow with 500 samples (seed 6) has no sample on two hooves' soles; the nearest
+// samples carried those legs on below them (140 phantom nodes, 6.2 voxels deep). The nodes held
+// inside more than max(3 voxels, 0.3 spacings) outside the samples' convex hull are set outside,
+// and the build says how many and how far out.
+TEST_F(Cli, SparseCowsLegsAreCutAtTheSamplesHullAndTheBuildSaysSo) {
+  const Outcome e = SampleBuildEval("cow.off", 500, 6, Path("cow"));
+  ASSERT_EQ(e.code, 0) << e.out;
+  EXPECT_LE(EvalFigure(e, "\"far_wrong\":"), 5.0) << e.out;
+  const Outcome b = Palpa("build " + Path("cow.xyz") + " -o " + Path("again.palpa") + " --cells 150");
+  ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_NE(b.out.find("mm outside the samples' convex hull (a part carried on past its last samples"),
+            std::string::npos)
+      << b.out;
+}
+
 // The positions of `palpa sample`'s output `xyz` (x y z nx ny nz lines).
 std::vector<std::array<double, 3>> SampledPositions(const std::string& xyz) {
   std::ifstream in(xyz);

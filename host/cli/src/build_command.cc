@@ -358,6 +358,12 @@ int RunBuild(const BuildArgs& args) {
                  "winding number's and the nearest samples' guess; more samples there would settle it\n",
                  args.points, coverage.uncovered_area_m2 * 1e6, coverage.min_distance_m * 1e3);
   }
+  if (built.hermite.hull_cut_nodes > 0 && !args.quiet)
+    fmt::print(stderr,
+               "palpa build: note: {}: {} nodes that the nearest samples held inside lay more than {:.3g} mm outside "
+               "the samples' convex hull (a part carried on past its last samples, such as an unsampled end) and were "
+               "set outside\n",
+               args.points, built.hermite.hull_cut_nodes, built.hermite.hull_cut_beyond_m * 1e3);
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
                "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; {}, so this "

@@ -98,6 +98,10 @@ TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const
 void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
                     std::vector<Eigen::Vector3d>& normals);
 
+// The outward planes (unit normal, offset: n . p + d > 0 outside) of the convex hull of `points`
+// (CGAL's convex_hull_3, hull_cgal.cc); empty for fewer than 4 points or a flat set.
+std::vector<Eigen::Vector4d> ConvexHullPlanes(const std::vector<Eigen::Vector3d>& points);
+
 // EachBehindTheOther's `min_sin` for the flat-pair test (orientation.cc) and the stray test
 // (samples.cc): sin(2 degrees), so that neighbours on one flat sheet, noise aside, are not a wall.
 inline constexpr double kThinWallSin = 0.034899496702500969;

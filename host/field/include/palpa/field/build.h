@@ -35,6 +35,8 @@ struct BuildOptions {
   FieldMethod method = FieldMethod::kHermite;
   // kHermite: the leak guard (hermite_field.h). erosion and edt always use the paper's raw packing.
   bool leak_guard = true;
+  // kHermite: HermiteOptions::hull_cut. Off only to measure what it prevents (tests).
+  bool hull_cut = true;
   // kHermite: when the field of an open scan is closed at the grid's faces, grow the grid (same
   // voxel, up to half the samples' longest side per side) to hold the closure, and build again
   // (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.

@@ -68,6 +68,11 @@ struct HermiteOptions {
   // winding.h). false: the former majority vote (SparseField::LabelUnallocatedBricks), kept to
   // measure the difference.
   bool winding_labels = true;
+  // On a closed set, inside nodes more than max(3 voxels, 0.3 sample spacings) outside the samples'
+  // convex hull (the guards' positions included) are set outside (issue 20; HermiteStats::
+  // hull_cut_nodes): the estimate had carried a sparse part on past its last samples. Off only to
+  // measure what it prevents.
+  bool hull_cut = true;
   // > 0 (metres): where the inside reached a grid face, LabelByWinding also finds how far past the
   // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
   // with the winding number and closing rule it already holds. 0: not searched.
@@ -100,8 +105,12 @@ struct HermiteStats {
   std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t winding_far_nodes = 0;      // evaluated nodes far from every sample given w's side
-  std::size_t face_nodes_closed = 0;      // inside nodes on a grid face set outside
-  std::size_t face_nodes_open = 0;        // of which no sample near faces that grid face: an open side's
+  // Closed sets: inside nodes more than hull_cut_beyond_m (metres) outside the samples' convex hull,
+  // set outside (a part the estimate carried past its last samples).
+  std::size_t hull_cut_nodes = 0;
+  double hull_cut_beyond_m = 0.0;
+  std::size_t face_nodes_closed = 0;  // inside nodes on a grid face set outside
+  std::size_t face_nodes_open = 0;    // of which no sample near faces that grid face: an open side's
   // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
   // winding number closed where nothing was scanned (an open scan or a hole). Estimated from the
   // grid edges it crosses (area ~ crossings h^2 / 1.5); 0 for a closed, well-sampled surface.
