@@ -52,7 +52,7 @@ constexpr double kTrustSpacings = 0.25;
 // On a closed set, a node held inside farther than the larger of these outside the convex hull of
 // the samples is outside (CutBeyondSampleHull). A surface bulges past its samples' hull only by a
 // sagitta of the gaps between them: on the sparse rows of 21 meshes (1,000 and 500 samples,
-// seeds 1-4) one row of 168 lost 13 true inside nodes (a pinion's unsampled tooth tip), while 2
+// seeds 1-4) one row of 168 lost 13 true inside nodes (a pinion's unsampled tooth tip), while 1-2
 // voxels alone made holes at sparse convex parts (knot1's tube with 500 samples has inside nodes
 // 3.2 voxels deep and 1.2 outside the hull; docs/field-methods.md § nodes beyond the samples' hull).
 constexpr double kHullVoxels = 3.0;
