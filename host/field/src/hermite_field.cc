@@ -1088,6 +1088,10 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
   const auto corner_index = [&](int a, int c, int e) {
     return (static_cast<std::size_t>(a) * cd[1] + static_cast<std::size_t>(c)) * cd[2] + static_cast<std::size_t>(e);
   };
+  // Corner q (bit 2: +x, bit 1: +y, bit 0: +z) of the cube from lattice point `lo` to `hi`.
+  const auto cube_corner = [](std::size_t q, const std::array<int, 3>& lo, const std::array<int, 3>& hi) {
+    return std::array<int, 3>{(q & 4) != 0 ? hi[0] : lo[0], (q & 2) != 0 ? hi[1] : lo[1], (q & 1) != 0 ? hi[2] : lo[2]};
+  };
   std::vector<std::size_t> candidates;  // bricks holding inside nodes whose bound may exceed `beyond`
   std::vector<std::uint8_t> needed(cd[0] * cd[1] * cd[2], 0);
   for (int bi = 0; bi < bd[0]; bi += kBlock)
@@ -1096,9 +1100,10 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
         const std::array<int, 3> lo{bi, bj, bk},
             hi{std::min(bi + kBlock, bd[0]), std::min(bj + kBlock, bd[1]), std::min(bk + kBlock, bd[2])};
         double most = -std::numeric_limits<double>::infinity();
-        for (std::size_t q = 0; q < 8; ++q)
-          most = std::max(most, g(corner_at((q & 4) != 0 ? hi[0] : lo[0], (q & 2) != 0 ? hi[1] : lo[1],
-                                            (q & 1) != 0 ? hi[2] : lo[2])));
+        for (std::size_t q = 0; q < 8; ++q) {
+          const auto [x, y, z] = cube_corner(q, lo, hi);
+          most = std::max(most, g(corner_at(x, y, z)));
+        }
         if (most <= beyond) continue;
         for (int a = lo[0]; a < hi[0]; ++a)
           for (int c = lo[1]; c < hi[1]; ++c)
@@ -1106,9 +1111,10 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
               const std::size_t b = field.BrickIndex(a, c, e);
               if (field.Slot(b) == SparseField::kUniformOutside) continue;
               candidates.push_back(b);
-              for (std::size_t q = 0; q < 8; ++q)
-                needed[corner_index(a + static_cast<int>(q >> 2), c + static_cast<int>((q >> 1) & 1),
-                                    e + static_cast<int>(q & 1))] = 1;
+              for (std::size_t q = 0; q < 8; ++q) {
+                const auto [x, y, z] = cube_corner(q, {a, c, e}, {a + 1, c + 1, e + 1});
+                needed[corner_index(x, y, z)] = 1;
+              }
             }
       }
   if (candidates.empty()) return 0;
@@ -1134,9 +1140,10 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
       const std::size_t b = candidates[m];
       const auto [bi, bj, bk] = field.BrickCoords(b);
       std::array<double, 8> cg{};
-      for (std::size_t q = 0; q < 8; ++q)
-        cg[q] = corner_g[corner_index(bi + static_cast<int>(q >> 2), bj + static_cast<int>((q >> 1) & 1),
-                                      bk + static_cast<int>(q & 1))];
+      for (std::size_t q = 0; q < 8; ++q) {
+        const auto [x, y, z] = cube_corner(q, {bi, bj, bk}, {bi + 1, bj + 1, bk + 1});
+        cg[q] = corner_g[corner_index(x, y, z)];
+      }
       if (*std::max_element(cg.begin(), cg.end()) <= beyond) continue;
       const float* values = field.BrickValues(b);  // null: uniform inside
       for (int a = 0; a < kB; ++a)
@@ -1366,7 +1373,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const auto open_face_cut = [&](int i, int j, int k, const V3& p, double w) {
     return w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p);
   };
-  const double trust = std::max(kTrustVoxels * h, kTrustSpacings * detail::Median(spacing));
+  const double median_spacing = detail::Median(spacing);
+  const double trust = std::max(kTrustVoxels * h, kTrustSpacings * median_spacing);
   // For the order-free searches below: any sample within trust, the nearest distance.
   const PointCloud cloud{&positions};
   const KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
@@ -1586,7 +1594,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   if (closed_set && hull_cut) {
     std::vector<V3> hull_points = positions;
     hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-    st.hull_cut_beyond_m = std::max(kHullVoxels * h, kHullSpacings * detail::Median(spacing));
+    st.hull_cut_beyond_m = std::max(kHullVoxels * h, kHullSpacings * median_spacing);
     st.hull_cut_nodes = CutBeyondSampleHull(field, wide, hull_points, st.hull_cut_beyond_m);
   }
   // No inside node on a grid face: the object must be closed inside the grid (an open scan's
