@@ -720,6 +720,77 @@ TEST(LeakGuard, ALoneDroppedSoleSampleStillEndsTheLeg) {
     }
 }
 
+// Issue 20: the cut at the samples' convex hull takes exactly the inside nodes more than its
+// threshold beyond the hull, whatever the grid's size (its boxes are clipped at the grid's edge).
+// A leg's walls without its sole, and the 8 corners of its box as samples too, so that the hull is
+// the box: g, the distance beyond it, is the largest of the 6 face planes' signed distances. Below
+// the open sole the estimate carries the leg on (hundreds of inside nodes past the threshold).
+// Built with the cut and without, every node keeps its side except those with g > threshold, all
+// of which turn outside, and the build counts them.
+TEST(HullCut, TakesExactlyTheInsideNodesBeyondTheThreshold) {
+  // Turned off the grid's axes, so that no node lies at the threshold's exact distance.
+  const Eigen::Matrix3d turn = (Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()) *
+                                Eigen::AngleAxisd(0.3, Eigen::Vector3d(1.0, 1.0, 0.0).normalized()))
+                                   .toRotationMatrix();
+  PointSet walls;
+  const PointSet leg = SampledLeg(200);
+  for (std::size_t i = 0; i < leg.positions.size(); ++i) {
+    if (leg.normals[i].z() < -0.9) continue;
+    walls.positions.push_back(turn * leg.positions[i]);
+    walls.normals.push_back(turn * leg.normals[i]);
+  }
+  for (int q = 0; q < 8; ++q) {
+    const Eigen::Vector3d s((q & 4) != 0 ? 1.0 : -1.0, (q & 2) != 0 ? 1.0 : -1.0, (q & 1) != 0 ? 1.0 : -1.0);
+    walls.positions.push_back(turn * Eigen::Vector3d(0.5 * s.x(), 0.5 * s.y(), 2.0 * s.z()));
+    walls.normals.push_back(turn * s.normalized());
+  }
+  const Transform fit = FitTransform(walls, 0.06);
+  const PointSet device = ApplyTransform(fit, walls);
+  // g in metres: the box's faces in the leg's own frame.
+  const auto g_box = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d q = turn.transpose() * ((p - fit.offset_m) / fit.scale);
+    return fit.scale * std::max((Eigen::Vector3d(-0.5, -0.5, -2.0) - q).maxCoeff(),
+                                (q - Eigen::Vector3d(0.5, 0.5, 2.0)).maxCoeff());
+  };
+  for (const int cells : {100, 150, 230}) {
+    BuildOptions options;
+    options.grid.cells = cells;
+    options.hull_cut = false;
+    const auto without = BuildField(device.positions, device.normals, options);
+    options.hull_cut = true;
+    const auto with = BuildField(device.positions, device.normals, options);
+    ASSERT_TRUE(without.has_value() && with.has_value());
+    const GridSpec& g = with->field.grid();
+    const double beyond = with->hermite.hull_cut_beyond_m;
+    ASSERT_GE(beyond, 3.0 * g.voxel_m) << cells;
+    std::size_t beyond_inside = 0, kept = 0, near = 0;
+    for (int i = 0; i < g.dims[0]; ++i)
+      for (int j = 0; j < g.dims[1]; ++j)
+        for (int k = 0; k < g.dims[2]; ++k) {
+          const double out = g_box(g.Node(i, j, k));
+          const bool inside_before = without->field.Value(i, j, k) <= 0.0f;
+          const bool inside_after = with->field.Value(i, j, k) <= 0.0f;
+          if (std::abs(out - beyond) < 1e-9 * g.voxel_m) {
+            ++near;  // at the threshold: rounding decides
+            continue;
+          }
+          if (out > beyond && inside_before) {
+            ++beyond_inside;
+            EXPECT_FALSE(inside_after) << cells << ": node " << i << " " << j << " " << k << " not cut";
+          } else {
+            EXPECT_EQ(inside_after, inside_before) << cells << ": node " << i << " " << j << " " << k;
+            if (inside_after) ++kept;
+          }
+        }
+    std::printf(
+        "[ turned leg, walls and corners, %d cells ] %zu inside nodes beyond %.2f voxels, %zu cut; %zu inside kept\n",
+        cells, beyond_inside, beyond / g.voxel_m, with->hermite.hull_cut_nodes, kept);
+    EXPECT_EQ(near, 0u) << cells;
+    EXPECT_GT(beyond_inside, 50u) << cells;
+    EXPECT_EQ(with->hermite.hull_cut_nodes, beyond_inside) << cells;
+  }
+}
+
 // A guard speaks only for its own side of the surfaces around it. Two legs side by side, 0.3
 // apart; A's samples on its wall facing B (|z| < 0.6) are dropped and given as guards, B is
 // sampled so sparsely (25-50 samples) that w inside it is unclear. Nodes more than 3 voxels deep
