@@ -5,7 +5,8 @@
 #   - whole `palpa build data/kitten.xyz` at 150, 300, 600 and 1,200 cells: wall time and peak
 #     RSS (/usr/bin/time -v), blob size, time(600)/time(300), time(1200)/time(600);
 #   - `palpa mesh` and `palpa export --npy` of the 1,200-cell blob: wall, peak RSS, output size;
-#   - scipy.ndimage.distance_transform_edt alone on the 300-cell grid, and the ratio;
+#   - scipy.ndimage.distance_transform_edt alone on the 300-cell grid, alternated with palpa's
+#     300-cell build at least 5 times, and the ratio of the minima and the median of the pairs;
 #   - palpa build at 300 cells with 1 and 2 TBB threads;
 #   - stage times (packing, patches, centre tests, evaluation, projection) at 150/300/600 cells;
 #   - packing (eq. 2-3) on cube.pwn: k-d tree (50,000 points; 1 and 2 threads) and brute force
