@@ -154,7 +154,7 @@ def main():
         print(f"| palpa {name} | {t['wall']:.2f} s | {t['rss'] / 1e6:.0f} MB | {t['out'] / 1e6:.0f} MB | "
               f"{(t['rss'] - t['out']) / 1e6:.0f} MB |")
     print(f"- scipy.ndimage.distance_transform_edt alone, 300-cell grid, alternated with palpa's 300-cell build "
-          f"{len(scipy_times)} times: scipy {min(scipy_times):.3f}-{max(scipy_times):.3f} s, palpa "
+          f"{len(scipy_times)} times: scipy {scipy_s:.3f}-{max(scipy_times):.3f} s, palpa "
           f"{min(pair_palpa):.3f}-{max(pair_palpa):.3f} s; scipy / whole palpa build = "
           f"{scipy_s / min(pair_palpa):.2f} (minima), {pair_ratios[len(pair_ratios) // 2]:.2f} (median of the pairs)"
           f"   (goal >= 2)")

@@ -640,6 +640,18 @@ PointSet SampledLeg(std::size_t count) {
   return points ? *points : PointSet{};
 }
 
+// SampledLeg's samples but those on its sole (an unsampled end).
+PointSet SampledLegWalls(std::size_t count) {
+  const PointSet points = SampledLeg(count);
+  PointSet walls;
+  for (std::size_t i = 0; i < points.positions.size(); ++i) {
+    if (points.normals[i].z() < -0.9) continue;
+    walls.positions.push_back(points.positions[i]);
+    walls.normals.push_back(points.normals[i]);
+  }
+  return walls;
+}
+
 // Builds `samples` (model units) fitted by `fit` at 100 cells, with `guards` (model units; none if
 // empty) as HermiteOptions::guard_positions and BuildOptions::hull_cut = `hull_cut`, and counts the
 // nodes for which `pred(model point, value <= 0, depth in voxels per model unit)` holds.
@@ -685,13 +697,8 @@ std::size_t CountLegNodes(const PointSet& samples, const PointSet& guards, const
 TEST(LeakGuard, ALoneDroppedSoleSampleStillEndsTheLeg) {
   for (const double sx : {0.05, 0.25})
     for (const std::size_t count : {200u, 300u}) {
-      const PointSet points = SampledLeg(count);
-      PointSet walls, sole, all;
-      for (std::size_t i = 0; i < points.positions.size(); ++i) {
-        if (points.normals[i].z() < -0.9) continue;
-        walls.positions.push_back(points.positions[i]);
-        walls.normals.push_back(points.normals[i]);
-      }
+      const PointSet walls = SampledLegWalls(count);
+      PointSet sole, all;
       sole.positions.emplace_back(sx, -sx, -2.0);
       sole.normals.emplace_back(0.0, 0.0, -1.0);
       all = walls;
@@ -732,13 +739,9 @@ TEST(HullCut, TakesExactlyTheInsideNodesBeyondTheThreshold) {
   const Eigen::Matrix3d turn = (Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()) *
                                 Eigen::AngleAxisd(0.3, Eigen::Vector3d(1.0, 1.0, 0.0).normalized()))
                                    .toRotationMatrix();
-  PointSet walls;
-  const PointSet leg = SampledLeg(200);
-  for (std::size_t i = 0; i < leg.positions.size(); ++i) {
-    if (leg.normals[i].z() < -0.9) continue;
-    walls.positions.push_back(turn * leg.positions[i]);
-    walls.normals.push_back(turn * leg.normals[i]);
-  }
+  PointSet walls = SampledLegWalls(200);
+  for (Eigen::Vector3d& p : walls.positions) p = turn * p;
+  for (Eigen::Vector3d& n : walls.normals) n = turn * n;
   for (int q = 0; q < 8; ++q) {
     const Eigen::Vector3d s((q & 4) != 0 ? 1.0 : -1.0, (q & 2) != 0 ? 1.0 : -1.0, (q & 1) != 0 ? 1.0 : -1.0);
     walls.positions.push_back(turn * Eigen::Vector3d(0.5 * s.x(), 0.5 * s.y(), 2.0 * s.z()));

@@ -1128,12 +1128,11 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
                                   std::min(box.lo[1] + box.size, grid.dims[1]),
                                   std::min(box.lo[2] + box.size, grid.dims[2])};
       if (box.lo[0] >= hi[0] || box.lo[1] >= hi[1] || box.lo[2] >= hi[2]) continue;
-      std::optional<std::size_t> brick;  // the box's, when it lies in one
-      if (box.size <= kB) {
-        brick = field.BrickIndex(box.lo[0] / kB, box.lo[1] / kB, box.lo[2] / kB);
-        if (field.Slot(*brick) == SparseField::kUniformOutside) continue;
+      if (box.size <= kB) {  // within one brick
+        const std::size_t b = field.BrickIndex(box.lo[0] / kB, box.lo[1] / kB, box.lo[2] / kB);
+        if (field.Slot(b) == SparseField::kUniformOutside) continue;
         // Reading the box's values costs less than one evaluation of g.
-        if (const float* values = field.BrickValues(*brick); values != nullptr) {
+        if (const float* values = field.BrickValues(b); values != nullptr) {
           bool inside = false;
           for (int i = box.lo[0]; i < hi[0] && !inside; ++i)
             for (int j = box.lo[1]; j < hi[1] && !inside; ++j)
@@ -1150,10 +1149,6 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
       const double gc = g(grid.origin_m + h * centre), reach = h * half.norm();
       if (gc + reach <= beyond) continue;
       if (gc - reach > beyond) {  // wholly beyond (a single node always is, here)
-        if (brick) {
-          cut_inside(*brick, box.lo, hi);
-          continue;
-        }
         for (int bi = box.lo[0] / kB; bi * kB < hi[0]; ++bi)
           for (int bj = box.lo[1] / kB; bj * kB < hi[1]; ++bj)
             for (int bk = box.lo[2] / kB; bk * kB < hi[2]; ++bk) {
