@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <numeric>
 #include <optional>
 #include <span>
 #include <utility>
@@ -21,6 +22,7 @@
 #include <Eigen/Geometry>
 #include <nanoflann.hpp>
 
+#include "palpa/field/box_nearest.h"
 #include "palpa/field/winding.h"
 #include "point_cloud.h"
 
@@ -141,6 +143,7 @@ constexpr int kBehindSectors = 5;
 constexpr std::size_t kGuardNeighbours = 8;
 // The far pass finds this many nearest samples once per unclear node for both.
 constexpr std::size_t kNearNeighbours = std::max(kLevelNeighbours, kGuardNeighbours);
+static_assert(kNearNeighbours <= kDiscNeighbours, "the far pass's NearestInBox serves both");
 // The level rule's cut side stands down beside a part's unsampled end: at least this many rim
 // samples (RimSamples) among the node's kLevelNeighbours nearest, the ring round the end. One is
 // a sparse set's sampling gap (a face's or an edge's), beside which the estimate carried patches
@@ -240,6 +243,9 @@ class AnyWithin {
   double radius_, bound_sq_;
   bool found_ = false;
 };
+
+// The far pass's and the centre tests' neighbour searches (palpa/field/box_nearest.h).
+using NearestInBox = BoxNearest<KdTree>;
 
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -1392,10 +1398,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     double change = 0.0;
     double nearest2 = 0.0;
   };
-  const auto near_discs = [&](const V3& p) {
+  const auto near_discs = [&](const V3& p, NearestInBox& box) {
     std::array<std::size_t, kDiscNeighbours> idx{};
     std::array<double, kDiscNeighbours> d2{};
-    const std::size_t got = wide.knnSearch(p.data(), kDiscNeighbours, idx.data(), d2.data());
+    const std::size_t got = box.Find(p, kDiscNeighbours, idx.data(), d2.data());
     NearDiscs out{0.0, got > 0 ? d2[0] : 0.0};
     for (std::size_t m = 0; m < got; ++m) {
       if (d2[m] <= 0.0) continue;
@@ -1408,7 +1414,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The far pass where w is unclear (|w - 1/2| <= kWindingClear) and against the estimate at node
   // p (value x, voxels): the node's new value where one of the two rules below overrules the
   // estimate, none where it stands.
-  const auto unclear_side = [&](const V3& p, float x, double w) -> std::optional<float> {
+  const auto unclear_side = [&](const V3& p, float x, double w, NearestInBox& box) -> std::optional<float> {
     // First, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): the estimate inside
     // and w below the surface's own level here (LocalLevel), away from a part's unsampled end (a
     // ring of rims, kPartEndRims: there the rims' balls close as on an open side, w low is no evidence),
@@ -1423,9 +1429,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // The node's nearest samples, once for the level rule and the guards below.
     std::array<std::size_t, kNearNeighbours> near_idx{};
     std::array<double, kNearNeighbours> near_d2{};
-    const std::size_t near = closed_set || !guard_positions.empty()
-                                 ? wide.knnSearch(p.data(), kNearNeighbours, near_idx.data(), near_d2.data())
-                                 : 0;
+    const std::size_t near =
+        closed_set || !guard_positions.empty() ? box.Find(p, kNearNeighbours, near_idx.data(), near_d2.data()) : 0;
     const std::size_t got = closed_set ? std::min(near, kLevelNeighbours) : 0;
     const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
     const bool cut_beside_rim = cut && static_cast<std::size_t>(std::count_if(
@@ -1499,10 +1504,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<int> node;
     std::vector<V3> at;
     std::vector<double> wn;
+    NearestInBox nearest(wide, positions, kDiscNeighbours);
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = evaluated[m];
       const std::array<float, 8> cw = corners(b);
       const auto [bi, bj, bk] = field.BrickCoords(b);
+      nearest.Box(node_at(bi * kB + 0.5 * (kB - 1), bj * kB + 0.5 * (kB - 1), bk * kB + 0.5 * (kB - 1)),
+                  0.5 * (kB - 1) * std::sqrt(3.0) * h * (1.0 + 1e-9));
       float* values = field.BrickValues(b);
       node.clear();
       at.clear();
@@ -1552,7 +1560,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         const V3& p = at[f];
         const double w = wn[f];
         if (closed_set && x <= 0.0f && w < kDiscPointMax) {
-          const NearDiscs discs = near_discs(p);
+          const NearDiscs discs = near_discs(p, nearest);
           if (w + discs.change < kDiscOutside && !rule.Inside(w, p)) {
             x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(discs.nearest2) / h)));
             ++local;
@@ -1565,14 +1573,14 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         if (std::abs(w - 0.5) <= kWindingClear) {
-          if (const std::optional<float> decided = unclear_side(p, x, w)) {
+          if (const std::optional<float> decided = unclear_side(p, x, w, nearest)) {
             x = *decided;
             ++local;
           }
           continue;
         }
         if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
-        wide.knnSearch(p.data(), 1, &idx, &d2);
+        nearest.Find(p, 1, &idx, &d2);
         const double ds = std::sqrt(d2);
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
@@ -1770,28 +1778,32 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   std::vector<std::uint32_t> candidate_samples(candidates.size() * kBrickCandidates);
   std::vector<std::uint8_t> candidate_count(candidates.size(), 0);
   tbb::enumerable_thread_specific<Scratch> scratch_tls;
-  // The candidates of `brick` into s.sample (and its model into s).
-  const auto find_candidates = [&](std::size_t brick, Scratch& s) {
+  // The candidates of `brick` into s.sample (and its model into s), from `box`, whose box holds
+  // the brick's centre.
+  const auto find_candidates = [&](std::size_t brick, Scratch& s, NearestInBox& box) {
     const std::array<int, 3> bc = field.BrickCoords(brick);
     const V3 centre = grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1)));
     s.idx.resize(kBrickCandidates);
     s.d2.resize(kBrickCandidates);
-    const std::size_t got = Nearest(tree, centre, kBrickCandidates, s.idx.data(), s.d2.data(), s.order);
+    const std::size_t got = box.Find(centre, kBrickCandidates, s.idx.data(), s.d2.data());
     s.sample.resize(got);
     for (std::size_t m = 0; m < got; ++m) s.sample[m] = static_cast<std::uint32_t>(s.idx[m]);
     s.Load(model);
   };
-  const auto gather = [&](std::size_t c, Scratch& s) {
-    find_candidates(candidates[c], s);
+  const auto gather = [&](std::size_t c, Scratch& s, NearestInBox& box) {
+    find_candidates(candidates[c], s, box);
     std::copy(s.sample.begin(), s.sample.end(),
               candidate_samples.begin() + static_cast<std::ptrdiff_t>(c * kBrickCandidates));
     candidate_count[c] = static_cast<std::uint8_t>(s.sample.size());
   };
   // Kept lists for the active bricks; a brick added later finds its candidates again (the same
-  // ones: Nearest is deterministic).
+  // ones: NearestInBox's answer does not depend on the box).
   const auto load_candidates = [&](std::size_t brick, Scratch& s) {
     if (candidate_of[brick] < 0) {
-      find_candidates(brick, s);
+      NearestInBox box(tree, positions, kBrickCandidates);
+      const std::array<int, 3> bc = field.BrickCoords(brick);
+      box.Box(grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1))), 0.0);
+      find_candidates(brick, s, box);
       return;
     }
     const auto c = static_cast<std::size_t>(candidate_of[brick]);
@@ -1811,22 +1823,42 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   // Active bricks: a brick whose centre is farther than band + half-diagonal (+1 for the
   // estimate's own error) from the surface holds no band node.
   const float half_diag = 0.5f * static_cast<float>(kB - 1) * std::sqrt(3.0f);
+  // The candidates by 2^3 block of bricks (brick order within), one NearestInBox per block: the
+  // box's radius is the distance from the block's centre to its bricks' centres.
+  std::vector<std::pair<std::array<int, 3>, std::size_t>> by_block(candidates.size());
+  for (std::size_t c = 0; c < candidates.size(); ++c) {
+    const std::array<int, 3> bc = field.BrickCoords(candidates[c]);
+    by_block[c] = {{bc[0] / 2, bc[1] / 2, bc[2] / 2}, c};
+  }
+  std::sort(by_block.begin(), by_block.end());
+  std::vector<std::size_t> block_starts;
+  for (std::size_t e = 0; e < by_block.size(); ++e)
+    if (e == 0 || by_block[e].first != by_block[e - 1].first) block_starts.push_back(e);
+  block_starts.push_back(by_block.size());
+  const double block_radius = 0.5 * kB * std::sqrt(3.0) * h * (1.0 + 1e-9);
   std::vector<std::uint8_t> active(n_bricks, 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 8), [&](const auto& r) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, block_starts.size() - 1, 1), [&](const auto& r) {
     Scratch& s = scratch_tls.local();
-    for (std::size_t c = r.begin(); c != r.end(); ++c) {
-      gather(c, s);
-      const std::array<int, 3> bc = field.BrickCoords(candidates[c]);
-      const V3 centre = origin_vox + V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1));
-      Lists all;
-      all.np = all.nin = all.nout = s.sample.size();
-      for (std::size_t m = 0; m < s.sample.size(); ++m)
-        all.p[m] = all.in[m] = all.out[m] = static_cast<std::uint8_t>(m);
-      Block block;
-      Pack(s, all, block);
-      const float phi = EvaluateBlock(model, block, static_cast<float>(centre.x()), static_cast<float>(centre.y()),
-                                      static_cast<float>(centre.z()), 4.0f * band);
-      if (std::abs(phi) < band + half_diag + kCentreTestMarginVoxels) active[candidates[c]] = 1;
+    NearestInBox box(tree, positions, kBrickCandidates);
+    for (std::size_t g = r.begin(); g != r.end(); ++g) {
+      const std::array<int, 3>& blk = by_block[block_starts[g]].first;
+      box.Box(grid.origin_m + h * (V3(blk[0] * 2 * kB, blk[1] * 2 * kB, blk[2] * 2 * kB) + V3::Constant(kB - 0.5)),
+              block_radius);
+      for (std::size_t e = block_starts[g]; e != block_starts[g + 1]; ++e) {
+        const std::size_t c = by_block[e].second;
+        gather(c, s, box);
+        const std::array<int, 3> bc = field.BrickCoords(candidates[c]);
+        const V3 centre = origin_vox + V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1));
+        Lists all;
+        all.np = all.nin = all.nout = s.sample.size();
+        for (std::size_t m = 0; m < s.sample.size(); ++m)
+          all.p[m] = all.in[m] = all.out[m] = static_cast<std::uint8_t>(m);
+        Block block;
+        Pack(s, all, block);
+        const float phi = EvaluateBlock(model, block, static_cast<float>(centre.x()), static_cast<float>(centre.y()),
+                                        static_cast<float>(centre.z()), 4.0f * band);
+        if (std::abs(phi) < band + half_diag + kCentreTestMarginVoxels) active[candidates[c]] = 1;
+      }
     }
   });
 

@@ -41,7 +41,8 @@ using KdTree =
 // (a minimum, a list sorted afterwards, whether any sample lies within a radius, the nearest
 // distance): the packing's and the guard's wide balls visit fewer nodes than with leaves of 10
 // (kitten, 300 cells, one thread: 69 -> 59 ms and 71 -> 65 ms). The k-nearest searches keep 10:
-// a tie at the kth distance goes to the sample visited first, so their results follow the tree.
+// a tie at the kth distance goes to the sample visited first, so their results follow the tree
+// (BoxNearest's do not: it breaks ties by index, palpa/field/box_nearest.h).
 inline constexpr std::size_t kRangeLeaf = 24;
 
 // A sample on a rim (an open scan's edge, a hole's): its nearest samples leave an angular gap
