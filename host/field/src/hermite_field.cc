@@ -1414,7 +1414,42 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The far pass where w is unclear (|w - 1/2| <= kWindingClear) and against the estimate at node
   // p (value x, voxels): the node's new value where one of the two rules below overrules the
   // estimate, none where it stands.
-  const auto unclear_side = [&](const V3& p, float x, double w, NearestInBox& box) -> std::optional<float> {
+  // unclear_side's first part: the node's nearest samples (once for the level rule and the guards)
+  // and whether the level rule needs grad w there.
+  struct UnclearNear {
+    bool cut = false;  // the estimate inside: w < 1/2 here
+    std::array<std::size_t, kNearNeighbours> near_idx{};
+    std::array<double, kNearNeighbours> near_d2{};
+    std::size_t near = 0, got = 0;
+    double level = 0.5;
+    bool wants_gradient = false;
+  };
+  const auto unclear_near = [&](const V3& p, float x, double w, NearestInBox& box) {
+    UnclearNear u;
+    u.cut = x <= 0.0f;
+    u.near =
+        closed_set || !guard_positions.empty() ? box.Find(p, kNearNeighbours, u.near_idx.data(), u.near_d2.data()) : 0;
+    u.got = closed_set ? std::min(u.near, kLevelNeighbours) : 0;
+    u.level = u.cut ? LocalLevel(levels, std::span(u.near_idx.data(), u.got)) : 0.5;
+    const bool cut_beside_rim =
+        u.cut && static_cast<std::size_t>(std::count_if(u.near_idx.begin(),
+                                                        u.near_idx.begin() + static_cast<std::ptrdiff_t>(u.got),
+                                                        [&](std::size_t k) { return rim[k] != 0; })) >= kPartEndRims;
+    u.wants_gradient = u.got > 0 && (w < u.level) == u.cut && !cut_beside_rim;
+    return u;
+  };
+  // The 6 points whose w gives unclear_side its central-difference grad w at node p: p + h e_x,
+  // p - h e_x, then y, z.
+  const auto gradient_steps = [&](const V3& p, std::vector<V3>& out) {
+    for (Eigen::Index axis = 0; axis < 3; ++axis) {
+      const V3 step = h * V3::Unit(axis);
+      out.push_back(V3(p + step));
+      out.push_back(V3(p - step));
+    }
+  };
+  // w_steps: w at gradient_steps' 6 points when u.wants_gradient (read only then).
+  const auto unclear_side = [&](const V3& p, float x, double w, const UnclearNear& u,
+                                const double* w_steps) -> std::optional<float> {
     // First, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): the estimate inside
     // and w below the surface's own level here (LocalLevel), away from a part's unsampled end (a
     // ring of rims, kPartEndRims: there the rims' balls close as on an open side, w low is no evidence),
@@ -1425,23 +1460,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // a sparse tube's strands, over an unsampled face), or cut short a part whose samples it did not
     // join. Not w >= level outside: outside a thin part w reaches a low level (the bull, camel and
     // elephant with 500 samples grew phantoms).
-    const bool cut = x <= 0.0f;  // w < 1/2 here
-    // The node's nearest samples, once for the level rule and the guards below.
-    std::array<std::size_t, kNearNeighbours> near_idx{};
-    std::array<double, kNearNeighbours> near_d2{};
-    const std::size_t near =
-        closed_set || !guard_positions.empty() ? box.Find(p, kNearNeighbours, near_idx.data(), near_d2.data()) : 0;
-    const std::size_t got = closed_set ? std::min(near, kLevelNeighbours) : 0;
-    const double level = cut ? LocalLevel(levels, std::span(near_idx.data(), got)) : 0.5;
-    const bool cut_beside_rim = cut && static_cast<std::size_t>(std::count_if(
-                                           near_idx.begin(), near_idx.begin() + static_cast<std::ptrdiff_t>(got),
-                                           [&](std::size_t k) { return rim[k] != 0; })) >= kPartEndRims;
-    if (got > 0 && (w < level) == cut && !cut_beside_rim) {
-      V3 grad;
-      for (Eigen::Index axis = 0; axis < 3; ++axis) {
-        const V3 step = h * V3::Unit(axis);
-        grad[axis] = 0.5 * (winding(V3(p + step)) - winding(V3(p - step)));
-      }
+    const bool cut = u.cut;
+    const std::size_t near = u.near, got = u.got;
+    const auto& near_idx = u.near_idx;
+    const auto& near_d2 = u.near_d2;
+    const double level = u.level;
+    if (u.wants_gradient) {
+      const V3 grad(0.5 * (w_steps[0] - w_steps[1]), 0.5 * (w_steps[2] - w_steps[3]), 0.5 * (w_steps[4] - w_steps[5]));
       const double nearest = std::sqrt(near_d2[0]) / h;
       const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
       // Either rule's surface must lie farther than the estimate's; `decided` is its distance
@@ -1505,6 +1530,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<V3> at;
     std::vector<double> wn;
     NearestInBox nearest(wide, positions, kDiscNeighbours);
+    std::vector<std::pair<std::size_t, UnclearNear>> unclear;  // (index into node, its first part)
+    std::vector<V3> steps;                                     // their gradient_steps
+    std::vector<double> w_steps;
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = evaluated[m];
       const std::array<float, 8> cw = corners(b);
@@ -1554,6 +1582,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         }
       wn.resize(at.size());
       winding(at, wn);
+      unclear.clear();
+      steps.clear();
       for (std::size_t f = 0; f < node.size(); ++f) {
         const int a = node[f] / (kB * kB), c = node[f] / kB % kB, e = node[f] % kB;
         float& x = values[node[f]];
@@ -1572,11 +1602,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         if ((w >= 0.5) == (x <= 0.0f)) continue;
         std::size_t idx = 0;
         double d2 = 0.0;
-        if (std::abs(w - 0.5) <= kWindingClear) {
-          if (const std::optional<float> decided = unclear_side(p, x, w, nearest)) {
-            x = *decided;
-            ++local;
-          }
+        if (std::abs(w - 0.5) <= kWindingClear) {  // decided below, with grad w from one batch
+          unclear.push_back({f, unclear_near(p, x, w, nearest)});
+          if (unclear.back().second.wants_gradient) gradient_steps(p, steps);
           continue;
         }
         if (x <= 0.0f && rule.Inside(w, p)) continue;  // closed by a rim's balls
@@ -1586,6 +1614,18 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         x = w >= 0.5 ? -mag : mag;
         ++local;
         if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
+      }
+      // A node's decision reads its own value only, so the unclear ones can wait for the batch.
+      w_steps.resize(steps.size());
+      winding(steps, w_steps);
+      std::size_t next = 0;
+      for (const auto& [f, u] : unclear) {
+        if (const std::optional<float> decided =
+                unclear_side(at[f], values[node[f]], wn[f], u, w_steps.data() + next)) {
+          values[node[f]] = *decided;
+          ++local;
+        }
+        if (u.wants_gradient) next += 6;
       }
     }
     far_flipped += local;
