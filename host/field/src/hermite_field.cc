@@ -378,7 +378,6 @@ constexpr double kTameCoordinate = 1e5;
 struct Scratch {
   std::vector<std::size_t> idx;
   std::vector<double> d2;
-  std::vector<std::pair<double, std::size_t>> order;
   std::vector<std::uint32_t> sample;
   std::vector<float> px, py, pz, ix, iy, iz, ir, ox, oy, oz, orad, dist2, f_in, f_out;
 
@@ -1411,9 +1410,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     }
     return out;
   };
-  // The far pass where w is unclear (|w - 1/2| <= kWindingClear) and against the estimate at node
-  // p (value x, voxels): the node's new value where one of the two rules below overrules the
-  // estimate, none where it stands.
   // unclear_side's first part: the node's nearest samples (once for the level rule and the guards)
   // and whether the level rule needs grad w there.
   struct UnclearNear {
@@ -1447,7 +1443,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       out.push_back(V3(p - step));
     }
   };
-  // w_steps: w at gradient_steps' 6 points when u.wants_gradient (read only then).
+  // The far pass where w is unclear (|w - 1/2| <= kWindingClear) and against the estimate at node
+  // p (value x, voxels): the node's new value where one of the two rules below overrules the
+  // estimate, none where it stands. u: unclear_near's answer there; w_steps: w at
+  // gradient_steps' 6 points when u.wants_gradient (read only then).
   const auto unclear_side = [&](const V3& p, float x, double w, const UnclearNear& u,
                                 const double* w_steps) -> std::optional<float> {
     // First, on a closed set (detail::kClosedFlux, kSureClosedFlux, kClosedRims): the estimate inside
