@@ -9,7 +9,6 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
-#include <numeric>
 #include <optional>
 #include <span>
 #include <utility>
@@ -1413,7 +1412,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // unclear_side's first part: the node's nearest samples (once for the level rule and the guards)
   // and whether the level rule needs grad w there.
   struct UnclearNear {
-    bool cut = false;  // the estimate inside: w < 1/2 here
     std::array<std::size_t, kNearNeighbours> near_idx{};
     std::array<double, kNearNeighbours> near_d2{};
     std::size_t near = 0, got = 0;
@@ -1422,16 +1420,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   };
   const auto unclear_near = [&](const V3& p, float x, double w, NearestInBox& box) {
     UnclearNear u;
-    u.cut = x <= 0.0f;
+    const bool cut = x <= 0.0f;  // the estimate inside: w < 1/2 here
     u.near =
         closed_set || !guard_positions.empty() ? box.Find(p, kNearNeighbours, u.near_idx.data(), u.near_d2.data()) : 0;
     u.got = closed_set ? std::min(u.near, kLevelNeighbours) : 0;
-    u.level = u.cut ? LocalLevel(levels, std::span(u.near_idx.data(), u.got)) : 0.5;
-    const bool cut_beside_rim =
-        u.cut && static_cast<std::size_t>(std::count_if(u.near_idx.begin(),
-                                                        u.near_idx.begin() + static_cast<std::ptrdiff_t>(u.got),
-                                                        [&](std::size_t k) { return rim[k] != 0; })) >= kPartEndRims;
-    u.wants_gradient = u.got > 0 && (w < u.level) == u.cut && !cut_beside_rim;
+    u.level = cut ? LocalLevel(levels, std::span(u.near_idx.data(), u.got)) : 0.5;
+    const bool cut_beside_rim = cut && static_cast<std::size_t>(std::count_if(
+                                           u.near_idx.begin(), u.near_idx.begin() + static_cast<std::ptrdiff_t>(u.got),
+                                           [&](std::size_t k) { return rim[k] != 0; })) >= kPartEndRims;
+    u.wants_gradient = u.got > 0 && (w < u.level) == cut && !cut_beside_rim;
     return u;
   };
   // The 6 points whose w gives unclear_side its central-difference grad w at node p: p + h e_x,
@@ -1459,7 +1456,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // a sparse tube's strands, over an unsampled face), or cut short a part whose samples it did not
     // join. Not w >= level outside: outside a thin part w reaches a low level (the bull, camel and
     // elephant with 500 samples grew phantoms).
-    const bool cut = u.cut;
+    const bool cut = x <= 0.0f;  // w < 1/2 here
     const std::size_t near = u.near, got = u.got;
     const auto& near_idx = u.near_idx;
     const auto& near_d2 = u.near_d2;
@@ -1819,12 +1816,14 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   tbb::enumerable_thread_specific<Scratch> scratch_tls;
   // The candidates of `brick` into s.sample (and its model into s), from `box`, whose box holds
   // the brick's centre.
-  const auto find_candidates = [&](std::size_t brick, Scratch& s, NearestInBox& box) {
+  const auto brick_centre = [&](std::size_t brick) {
     const std::array<int, 3> bc = field.BrickCoords(brick);
-    const V3 centre = grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1)));
+    return V3(grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1))));
+  };
+  const auto find_candidates = [&](std::size_t brick, Scratch& s, NearestInBox& box) {
     s.idx.resize(kBrickCandidates);
     s.d2.resize(kBrickCandidates);
-    const std::size_t got = box.Find(centre, kBrickCandidates, s.idx.data(), s.d2.data());
+    const std::size_t got = box.Find(brick_centre(brick), kBrickCandidates, s.idx.data(), s.d2.data());
     s.sample.resize(got);
     for (std::size_t m = 0; m < got; ++m) s.sample[m] = static_cast<std::uint32_t>(s.idx[m]);
     s.Load(model);
@@ -1840,8 +1839,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   const auto load_candidates = [&](std::size_t brick, Scratch& s) {
     if (candidate_of[brick] < 0) {
       NearestInBox box(tree, positions, kBrickCandidates);
-      const std::array<int, 3> bc = field.BrickCoords(brick);
-      box.Box(grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1))), 0.0);
+      box.Box(brick_centre(brick), 0.0);
       find_candidates(brick, s, box);
       return;
     }
