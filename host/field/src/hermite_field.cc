@@ -246,6 +246,13 @@ class AnyWithin {
 // The far pass's and the centre tests' neighbour searches (palpa/field/box_nearest.h).
 using NearestInBox = BoxNearest<KdTree>;
 
+// The centre node of brick `bc` (brick coordinates) of a grid whose node (0, 0, 0) lies at `origin`
+// with voxel h (metres): the point both the far pass and the centre tests search samples from.
+V3 BrickCentre(const V3& origin, double h, const std::array<int, 3>& bc) {
+  constexpr int kB = SparseField::kBrick;
+  return origin + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1)));
+}
+
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -1457,14 +1464,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // join. Not w >= level outside: outside a thin part w reaches a low level (the bull, camel and
     // elephant with 500 samples grew phantoms).
     const bool cut = x <= 0.0f;  // w < 1/2 here
-    const std::size_t near = u.near, got = u.got;
-    const auto& near_idx = u.near_idx;
-    const auto& near_d2 = u.near_d2;
-    const double level = u.level;
+    const std::span<const std::size_t> level_near(u.near_idx.data(), u.got);
     if (u.wants_gradient) {
       const V3 grad(0.5 * (w_steps[0] - w_steps[1]), 0.5 * (w_steps[2] - w_steps[3]), 0.5 * (w_steps[4] - w_steps[5]));
-      const double nearest = std::sqrt(near_d2[0]) / h;
-      const double to_level = grad.norm() > 1e-12 ? std::abs(level - w) / grad.norm() : nearest;
+      const double nearest = std::sqrt(u.near_d2[0]) / h;
+      const double to_level = grad.norm() > 1e-12 ? std::abs(u.level - w) / grad.norm() : nearest;
       // Either rule's surface must lie farther than the estimate's; `decided` is its distance
       // (voxels, > 0 since nearest > trust), 0 while neither stands.
       const double beyond = std::max(std::abs(static_cast<double>(x)), kLevelMinVoxels);
@@ -1475,7 +1479,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         // carried one face's patches past its edge (CGAL's joint, clean, 5,000 samples: 4
         // phantom nodes 3.5-3.8 voxels out beneath a convex edge, the nearest sample 6.4 voxels
         // away on the other face; w 0.30, its level surface 1.25 voxels off, the estimate's 2.15).
-        const double edge = EdgeSide(p, positions, normals, std::span(near_idx.data(), got)) / h;
+        const double edge = EdgeSide(p, positions, normals, level_near) / h;
         if (std::isfinite(edge) && (edge > 0.0) == cut && (!cut || w <= 0.5 - kEdgeLeanWinding) &&
             std::abs(edge) > beyond)
           decided = std::abs(edge);
@@ -1486,7 +1490,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         // nearest sample's. The cow's rump under its tail (1,000 samples, seed 1) had 52 hole
         // nodes 3-4.5 voxels deep: the estimate +4.45 voxels from the tail's patches, w 0.58-0.70,
         // its 1/2 surface 0.9-2.6 voxels off, nearer than the estimate's.
-        const double behind = BehindTouchingPart(p, positions, normals, std::span(near_idx.data(), got)) / h;
+        const double behind = BehindTouchingPart(p, positions, normals, level_near) / h;
         if (behind > 0.0) decided = std::min(behind, nearest);
       }
       if (decided > 0.0) {
@@ -1505,9 +1509,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     double g2 = 0.0;
     guards.knnSearch(p.data(), 1, &g, &g2);
     const double front = (p - guard_positions[g]).dot(guard_normals[g]);
-    const std::size_t guard_near = std::min(near, kGuardNeighbours);
-    if (front <= trust || !GuardEndsPart(p, guard_positions[g], g2, positions, normals,
-                                         std::span(near_idx.data(), guard_near), std::span(near_d2.data(), guard_near)))
+    const std::size_t guard_near = std::min(u.near, kGuardNeighbours);
+    if (front <= trust ||
+        !GuardEndsPart(p, guard_positions[g], g2, positions, normals, std::span(u.near_idx.data(), guard_near),
+                       std::span(u.near_d2.data(), guard_near)))
       return std::nullopt;
     return std::min(band, static_cast<float>(front / h));
   };
@@ -1533,8 +1538,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const std::size_t b = evaluated[m];
       const std::array<float, 8> cw = corners(b);
       const auto [bi, bj, bk] = field.BrickCoords(b);
-      nearest.Box(node_at(bi * kB + 0.5 * (kB - 1), bj * kB + 0.5 * (kB - 1), bk * kB + 0.5 * (kB - 1)),
-                  0.5 * (kB - 1) * std::sqrt(3.0) * h * (1.0 + 1e-9));
+      nearest.Box(BrickCentre(grid.origin_m, h, {bi, bj, bk}), 0.5 * (kB - 1) * std::sqrt(3.0) * h * (1.0 + 1e-9));
       float* values = field.BrickValues(b);
       node.clear();
       at.clear();
@@ -1816,10 +1820,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   tbb::enumerable_thread_specific<Scratch> scratch_tls;
   // The candidates of `brick` into s.sample (and its model into s), from `box`, whose box holds
   // the brick's centre.
-  const auto brick_centre = [&](std::size_t brick) {
-    const std::array<int, 3> bc = field.BrickCoords(brick);
-    return V3(grid.origin_m + h * (V3(bc[0] * kB, bc[1] * kB, bc[2] * kB) + V3::Constant(0.5 * (kB - 1))));
-  };
+  const auto brick_centre = [&](std::size_t brick) { return BrickCentre(grid.origin_m, h, field.BrickCoords(brick)); };
   const auto find_candidates = [&](std::size_t brick, Scratch& s, NearestInBox& box) {
     s.idx.resize(kBrickCandidates);
     s.d2.resize(kBrickCandidates);
