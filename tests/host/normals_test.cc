@@ -543,6 +543,42 @@ TEST(FlipSheetsByWinding, EverySheetThatLowersTheEnergyIsTurnedHoweverManyRounds
   EXPECT_EQ(CountAgainst(normals, sphere.normals), 0u);
 }
 
+TEST(FlipSheetsOnSharpenedLines, RunsOnlyWhereTheFirstPassRanOnClosedPieces) {
+  // A sphere's sampled normals with a cap of 12 inward: the pass turns it on a clean set whose
+  // pieces all closed, and leaves it alone on a noisy set's lines or with a piece open.
+  constexpr std::size_t kSamples = 2000;
+  const Oriented sphere = Sphere(kSamples, 1.0);
+  std::vector<V3> wrong = sphere.normals;
+  std::size_t cap = 0;
+  for (std::size_t i = 0; i < kSamples; ++i) {
+    if ((sphere.positions[i] - V3(0, 0, 1)).norm() < 0.15) {
+      wrong[i] = -wrong[i];
+      ++cap;
+    }
+  }
+  ASSERT_GT(cap, 5u);
+  NormalsReport clean;
+  clean.neighbours = kCleanNormalNeighbours;
+  std::vector<V3> normals = wrong;
+  EXPECT_EQ(FlipSheetsOnSharpenedLines(sphere.positions, normals, clean), cap);
+  EXPECT_EQ(clean.refined_sheet_samples, cap);
+  EXPECT_GE(clean.refined_sheets, 1u);
+  EXPECT_EQ(CountAgainst(normals, sphere.normals), 0u);
+  EXPECT_NE(clean.Describe().find("turned again on the sharpened normals"), std::string::npos) << clean.Describe();
+
+  NormalsReport noisy;
+  noisy.neighbours = kNormalNeighbours;
+  NormalsReport open = clean;
+  open.refined_sheets = open.refined_sheet_samples = 0;
+  open.open_components = 1;
+  for (NormalsReport* r : {&noisy, &open}) {
+    normals = wrong;
+    EXPECT_EQ(FlipSheetsOnSharpenedLines(sphere.positions, normals, *r), 0u);
+    EXPECT_EQ(CountAgainst(normals, sphere.normals), cap);
+    EXPECT_EQ(r->Describe().find("sharpened"), std::string::npos);
+  }
+}
+
 TEST(FlipSheetsByWinding, WrongPatchesOnThinPlatesAreTurnedBack) {
   // Closed plates 1 to 2.5 spacings thick, normals exact or tilted by N(0, 0.15) per axis (about
   // 9 degrees, as estimated lines), 30 patches within 1.2 spacings of a random sample turned

@@ -178,8 +178,10 @@ int RunBuild(const BuildArgs& args) {
         normals_mode == field::NormalsMode::kEstimate && args.denoise == "auto" && provisional_voxel > 0 &&
         field::RefitNoisyNormalLines(points->positions, points->normals, normals_report,
                                      field::kDenoiseVoxels * provisional_voxel, field::kDenoiseNeighbours);
-    if (normals_mode == field::NormalsMode::kEstimate)
+    if (normals_mode == field::NormalsMode::kEstimate) {
       field::RefineNormalLines(points->positions, points->normals, normals_report.neighbours);
+      field::FlipSheetsOnSharpenedLines(points->positions, points->normals, normals_report);
+    }
     if (refit && !args.quiet)
       fmt::print(stderr,
                  "palpa build: note: {}: the samples are clean for their spacing but their position noise is over "

@@ -900,6 +900,9 @@ std::string NormalsReport::Describe() const {
   if (closed_by_sheets > 0)
     out += fmt::format("; {} open piece{} closed by turning inverted sheets ({} normals)", closed_by_sheets,
                        closed_by_sheets == 1 ? "" : "s", closed_by_sheets_samples);
+  if (refined_sheets > 0)
+    out += fmt::format("; {} sheet{} turned again on the sharpened normals ({} normals)", refined_sheets,
+                       refined_sheets == 1 ? "" : "s", refined_sheet_samples);
   return out;
 }
 
@@ -1642,6 +1645,16 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
   report.flipped = 0;
   for (std::size_t i = 0; i < n; ++i)  // `given` is `normals`: the file's is +-oriented[i] by keep[i]
     if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;
+}
+
+std::size_t FlipSheetsOnSharpenedLines(const std::vector<V3>& positions, std::vector<V3>& normals,
+                                       NormalsReport& report) {
+  if (report.neighbours != kCleanNormalNeighbours || report.open_components > 0 || positions.empty() ||
+      normals.size() != positions.size())
+    return 0;
+  report.refined_sheet_samples =
+      FlipSheetsByWinding(positions, normals, std::vector<std::uint8_t>(positions.size(), 1), report.refined_sheets);
+  return report.refined_sheet_samples;
 }
 
 bool RefitNoisyNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, NormalsReport& report,
