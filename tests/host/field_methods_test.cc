@@ -83,12 +83,8 @@ mesh::EvalResult Score(const Case& c, const mesh::Truth& truth, const char* what
 // over kDenoiseNeighbours), refined, sheets turned again on the refined lines.
 NormalsReport EstimateAsBuildDoes(PointSet& points, double voxel = 0) {
   NormalsReport report;
-  report.neighbours = EstimateNormalLines(points.positions, points.normals);
-  OrientNormals(points.positions, points.normals, false, report, true);
-  if (voxel > 0)
-    RefitNoisyNormalLines(points.positions, points.normals, report, kDenoiseVoxels * voxel, kDenoiseNeighbours);
-  RefineNormalLines(points.positions, points.normals, report.neighbours);
-  FlipSheetsOnSharpenedLines(points.positions, points.normals, report);
+  report.neighbours = EstimateNormalLines(points.positions, points.normals, &report.noise_figure);
+  OrientEstimatedNormals(points.positions, points.normals, report, kDenoiseVoxels * voxel);
   return report;
 }
 

@@ -1732,5 +1732,41 @@ TEST(RefitNoisyNormalLines, FitsLinesAgainWhereTheNoiseExceedsTheThreshold) {
   EXPECT_FALSE(RefitNoisyNormalLines(sphere.positions, refitted, above, 0.5 * sigma, 48));
 }
 
+// --- OrientEstimatedNormals: the build's sequence in one call ------------------------------------
+
+TEST(OrientEstimatedNormals, IsTheBuildsSequenceAndPointsOutward) {
+  // A noisy sphere's jet lines, signs scrambled: one call gives every normal outward (the
+  // truth, independent of the code) and exactly what the four separate steps give, with the
+  // refit above the noise and without it below.
+  Oriented sphere = Sphere(6000, 1.0);
+  const double sigma = 0.0025;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  for (V3& p : sphere.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  std::vector<V3> lines;
+  NormalsReport fitted;
+  fitted.neighbours = EstimateNormalLines(sphere.positions, lines, &fitted.noise_figure);
+  ASSERT_EQ(fitted.neighbours, kCleanNormalNeighbours);
+  for (std::size_t i = 0; i < lines.size(); ++i)
+    if (i % 3 == 0) lines[i] = -lines[i];
+  for (const double threshold : {0.5 * sigma, 4.0 * sigma}) {
+    NormalsReport one = fitted, steps = fitted;
+    std::vector<V3> by_one = lines, by_steps = lines;
+    const bool refit = OrientEstimatedNormals(sphere.positions, by_one, one, threshold);
+    OrientNormals(sphere.positions, by_steps, false, steps, true);
+    EXPECT_EQ(RefitNoisyNormalLines(sphere.positions, by_steps, steps, threshold, kDenoiseNeighbours), refit);
+    RefineNormalLines(sphere.positions, by_steps, steps.neighbours);
+    FlipSheetsOnSharpenedLines(sphere.positions, by_steps, steps);
+    EXPECT_EQ(refit, threshold < sigma) << threshold;
+    EXPECT_EQ(by_one, by_steps) << threshold;
+    EXPECT_EQ(one.Describe(), steps.Describe());
+    for (std::size_t i = 0; i < by_one.size(); ++i) ASSERT_GT(by_one[i].dot(sphere.positions[i]), 0.0) << i;
+  }
+  std::vector<V3> mismatched(10, V3::UnitX());
+  NormalsReport untouched = fitted;
+  EXPECT_FALSE(OrientEstimatedNormals(sphere.positions, mismatched, untouched, sigma));
+  EXPECT_EQ(mismatched, std::vector<V3>(10, V3::UnitX()));
+}
+
 }  // namespace
 }  // namespace palpa::field

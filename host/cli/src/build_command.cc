@@ -170,18 +170,14 @@ int RunBuild(const BuildArgs& args) {
                args.points, dropped.Describe(), dropped.kept);
   }
   if (normals_mode != field::NormalsMode::kKeep) {
-    field::OrientNormals(points->positions, points->normals, normals_mode == field::NormalsMode::kOrient,
-                         normals_report, normals_mode == field::NormalsMode::kEstimate);
     // Samples clean for their spacing can be noisy for the grid, and --denoise auto below moves them
     // along their lines: the denoiser's measure and threshold, on the provisional voxel.
     const bool refit =
-        normals_mode == field::NormalsMode::kEstimate && args.denoise == "auto" && provisional_voxel > 0 &&
-        field::RefitNoisyNormalLines(points->positions, points->normals, normals_report,
-                                     field::kDenoiseVoxels * provisional_voxel, field::kDenoiseNeighbours);
-    if (normals_mode == field::NormalsMode::kEstimate) {
-      field::RefineNormalLines(points->positions, points->normals, normals_report.neighbours);
-      field::FlipSheetsOnSharpenedLines(points->positions, points->normals, normals_report);
-    }
+        normals_mode == field::NormalsMode::kEstimate
+            ? field::OrientEstimatedNormals(
+                  points->positions, points->normals, normals_report,
+                  args.denoise == "auto" && provisional_voxel > 0 ? field::kDenoiseVoxels * provisional_voxel : 0.0)
+            : (field::OrientNormals(points->positions, points->normals, true, normals_report), false);
     if (refit && !args.quiet)
       fmt::print(stderr,
                  "palpa build: note: {}: the samples are clean for their spacing but their position noise is over "

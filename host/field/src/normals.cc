@@ -1035,6 +1035,28 @@ struct SheetNeighbours {
   const std::vector<std::array<std::uint32_t, kSheetGraph>>& graph;
 };
 
+// SheetNeighbours built on first use and kept for later sheet passes over the same positions
+// (OrientEstimatedNormals runs up to three; a 2,000,000-sample bare build spends about 1 % of its
+// time on each graph, within its run-to-run spread).
+class SheetGraph {
+ public:
+  explicit SheetGraph(const std::vector<V3>& positions) : cloud_{&positions} {}
+  SheetGraph(const SheetGraph&) = delete;
+  SheetGraph& operator=(const SheetGraph&) = delete;
+  SheetNeighbours Get() {
+    if (!tree_) {
+      tree_.emplace(3, cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+      graph_ = NearestGraph<kSheetGraph>(*tree_, *cloud_.points);
+    }
+    return SheetNeighbours{*tree_, graph_};
+  }
+
+ private:
+  detail::PointCloud cloud_;
+  std::optional<detail::KdTree> tree_;
+  std::vector<std::array<std::uint32_t, kSheetGraph>> graph_;
+};
+
 // w at every sample's probes for the normals as they stand (SampleProbes::InsideOutside), with the
 // near field smoothed (kSheetNearField) only at the samples some candidate sheet reaches: only
 // those are read, and the smoothing's nearest-sample searches were most of a pass's time (a
@@ -1279,20 +1301,15 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   return flipped;
 }
 
-}  // namespace
-
-std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3>& normals,
-                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
-                                std::size_t coarse_fraction) {
+// FlipSheetsByWinding on `shared`, built over `positions`.
+std::size_t FlipSheetsOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals,
+                         const std::vector<std::uint8_t>& eligible, std::size_t& sheets, std::size_t coarse_fraction) {
   sheets = 0;
   const std::size_t n = positions.size();
   if (normals.size() != n || eligible.size() != n || coarse_fraction < 2) return 0;
   std::size_t flipped = 0;
-  const detail::PointCloud cloud{&positions};
-  const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  const std::vector<std::array<std::uint32_t, kSheetGraph>> graph = NearestGraph<kSheetGraph>(tree, positions);
-  const SheetNeighbours neighbours{tree, graph};
-  const OtherSides other_sides = ThinWallOtherSides(positions, normals, tree);  // lines: the same in every pass
+  const SheetNeighbours neighbours = shared.Get();
+  const OtherSides other_sides = ThinWallOtherSides(positions, normals, neighbours.tree);  // lines: every pass's
   std::vector<std::uint8_t> thin_walls(n, 0);  // samples with another side (SampleProbes' thin_walls)
   for (std::size_t i = 0; i < n; ++i) thin_walls[i] = other_sides[i][0] != UINT32_MAX ? 1 : 0;
   SheetProbeWinding cache;
@@ -1304,6 +1321,15 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
     sheets += turned;
   }
   return flipped;
+}
+
+}  // namespace
+
+std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3>& normals,
+                                const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
+                                std::size_t coarse_fraction) {
+  SheetGraph shared(positions);
+  return FlipSheetsOn(shared, positions, normals, eligible, sheets, coarse_fraction);
 }
 
 SheetDipoles::SheetDipoles(std::span<const std::uint32_t> samples, const std::vector<V3>& positions,
@@ -1496,8 +1522,11 @@ TreeSigns SignsByTree(const std::vector<V3>& positions, const std::vector<V3>& g
   return {std::move(component), std::move(keep), roots.size()};
 }
 
-void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
-                   NormalsReport& report, bool given_are_jet_lines) {
+namespace {
+
+// OrientNormals with its sheet passes on `shared`, built over `positions`.
+void OrientOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
+              NormalsReport& report, bool given_are_jet_lines) {
   const std::size_t n = positions.size();
   if (n == 0 || normals.size() != n) return;
   const std::vector<V3>& given = normals;
@@ -1614,7 +1643,8 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
       closed[i] = now[c].norm() < detail::kClosedFlux * area[c] ? 1 : 0;
       any = any || closed[i] != 0;
     }
-    if (any) report.sheet_samples = FlipSheetsByWinding(positions, normals, closed, report.sheets);
+    if (any)
+      report.sheet_samples = FlipSheetsOn(shared, positions, normals, closed, report.sheets, kSheetCoarseFraction);
     // A piece open by its flux may be a closed surface with a sheet inverted as a whole, too large
     // for the pass above (CGAL's spool: one flange's face, 929 of 5,000 samples, reached across
     // its rim 2.5 spacings thick; flux 0.33 of the area, 0.013 once turned). The pass runs again on
@@ -1627,7 +1657,7 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     std::vector<V3> trial = normals;
     std::size_t trial_sheets = 0;
     if (std::find(open_piece.begin(), open_piece.end(), 1) != open_piece.end() &&
-        FlipSheetsByWinding(positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
+        FlipSheetsOn(shared, positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
       std::vector<V3> after(pieces, V3::Zero());
       for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
       std::vector<std::uint8_t> stands(pieces, 0);  // an open piece the trial closes
@@ -1647,14 +1677,41 @@ void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, b
     if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;
 }
 
-std::size_t FlipSheetsOnSharpenedLines(const std::vector<V3>& positions, std::vector<V3>& normals,
-                                       NormalsReport& report) {
+std::size_t FlipSheetsOnSharpenedLinesOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals,
+                                         NormalsReport& report) {
   if (report.neighbours != kCleanNormalNeighbours || report.open_components > 0 || positions.empty() ||
       normals.size() != positions.size())
     return 0;
   report.refined_sheet_samples =
-      FlipSheetsByWinding(positions, normals, std::vector<std::uint8_t>(positions.size(), 1), report.refined_sheets);
+      FlipSheetsOn(shared, positions, normals, std::vector<std::uint8_t>(positions.size(), 1), report.refined_sheets,
+                   kSheetCoarseFraction);
   return report.refined_sheet_samples;
+}
+
+}  // namespace
+
+void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
+                   NormalsReport& report, bool given_are_jet_lines) {
+  SheetGraph shared(positions);
+  OrientOn(shared, positions, normals, keep_file_majority, report, given_are_jet_lines);
+}
+
+std::size_t FlipSheetsOnSharpenedLines(const std::vector<V3>& positions, std::vector<V3>& normals,
+                                       NormalsReport& report) {
+  SheetGraph shared(positions);
+  return FlipSheetsOnSharpenedLinesOn(shared, positions, normals, report);
+}
+
+bool OrientEstimatedNormals(const std::vector<V3>& positions, std::vector<V3>& normals, NormalsReport& report,
+                            double refit_noise_threshold) {
+  if (positions.empty() || normals.size() != positions.size()) return false;
+  SheetGraph shared(positions);
+  OrientOn(shared, positions, normals, false, report, true);
+  const bool refit = refit_noise_threshold > 0 &&
+                     RefitNoisyNormalLines(positions, normals, report, refit_noise_threshold, kDenoiseNeighbours);
+  RefineNormalLines(positions, normals, report.neighbours);
+  FlipSheetsOnSharpenedLinesOn(shared, positions, normals, report);
+  return refit;
 }
 
 bool RefitNoisyNormalLines(const std::vector<V3>& positions, std::vector<V3>& normals, NormalsReport& report,

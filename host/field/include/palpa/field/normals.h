@@ -70,6 +70,8 @@ struct NormalsReport {
 /// Number of neighbours of the jet fit (noisy samples; clean ones) and of the orientation graph.
 inline constexpr int kNormalNeighbours = 18;
 inline constexpr int kCleanNormalNeighbours = 10;
+/// FlipSheetsByWinding's largest sheet, as a fraction 1 / this of the samples, on closed pieces.
+inline constexpr std::size_t kSheetCoarseFraction = 8;
 inline constexpr int kOrientNeighbours = 12;
 /// Samples are clean when the median over them (at most 20,000) of (RMS residual of a quadric
 /// fitted to the 10 nearest along their 10-neighbour jet normal) / (distance to the 8th nearest)
@@ -264,7 +266,7 @@ class SheetDipoles {
 /// Returns the samples flipped over both passes; `sheets` the sheets. Unit normals in, same lines out. Deterministic.
 std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                                 const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
-                                std::size_t coarse_fraction = 8);
+                                std::size_t coarse_fraction = kSheetCoarseFraction);
 
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
@@ -297,5 +299,15 @@ void OrientNormals(const std::vector<Eigen::Vector3d>& positions, std::vector<Ei
 /// were refitted; otherwise nothing changes. Shapes as EstimateNormalLines; deterministic.
 bool RefitNoisyNormalLines(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                            NormalsReport& report, double noise_threshold, std::size_t noise_neighbours);
+
+/// The signs and final lines of normals that EstimateNormalLines fitted, as `palpa build
+/// --normals estimate` gives them: OrientNormals (estimate mode), RefitNoisyNormalLines when
+/// `refit_noise_threshold` > 0 (units of the positions; --denoise auto passes kDenoiseVoxels x the
+/// provisional voxel, samples.h) with kDenoiseNeighbours, RefineNormalLines, then
+/// FlipSheetsOnSharpenedLines; the sheet passes share one neighbour graph. `report.neighbours`
+/// must hold the fit's neighbours on entry. Returns whether the lines were fitted again as noisy.
+/// Shapes as OrientNormals; a size mismatch or no samples changes nothing and returns false.
+bool OrientEstimatedNormals(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
+                            NormalsReport& report, double refit_noise_threshold);
 
 }  // namespace palpa::field
