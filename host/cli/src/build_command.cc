@@ -172,12 +172,13 @@ int RunBuild(const BuildArgs& args) {
   if (normals_mode != field::NormalsMode::kKeep) {
     // Samples clean for their spacing can be noisy for the grid, and --denoise auto below moves them
     // along their lines: the denoiser's measure and threshold, on the provisional voxel.
-    const bool refit =
-        normals_mode == field::NormalsMode::kEstimate
-            ? field::OrientEstimatedNormals(
-                  points->positions, points->normals, normals_report,
-                  args.denoise == "auto" && provisional_voxel > 0 ? field::kDenoiseVoxels * provisional_voxel : 0.0)
-            : (field::OrientNormals(points->positions, points->normals, true, normals_report), false);
+    bool refit = false;
+    if (normals_mode == field::NormalsMode::kEstimate)
+      refit = field::OrientEstimatedNormals(
+          points->positions, points->normals, normals_report,
+          args.denoise == "auto" && provisional_voxel > 0 ? field::kDenoiseVoxels * provisional_voxel : 0.0);
+    else
+      field::OrientNormals(points->positions, points->normals, true, normals_report);
     if (refit && !args.quiet)
       fmt::print(stderr,
                  "palpa build: note: {}: the samples are clean for their spacing but their position noise is over "
