@@ -1698,12 +1698,19 @@ double MeanRadialAngleDeg(const std::vector<V3>& positions, const std::vector<V3
   return sum / static_cast<double>(positions.size());
 }
 
-TEST(RefitNoisyNormalLines, FitsLinesAgainWhereTheNoiseExceedsTheThreshold) {
-  Oriented sphere = Sphere(8000, 1.0);  // spacing ~0.04
-  const double sigma = 0.0025;          // clean for that spacing (EstimateNormalLines' figure)
-  std::mt19937_64 rng(11);
+// `n` samples of the unit sphere (Sphere) moved by Gaussian noise of `sigma` per axis (`seed`);
+// the normals stay the exact ones.
+Oriented NoisySphere(std::size_t n, double sigma, std::uint64_t seed) {
+  Oriented sphere = Sphere(n, 1.0);
+  std::mt19937_64 rng(seed);
   std::normal_distribution<double> gauss(0.0, sigma);
   for (V3& p : sphere.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  return sphere;
+}
+
+TEST(RefitNoisyNormalLines, FitsLinesAgainWhereTheNoiseExceedsTheThreshold) {
+  const double sigma = 0.0025;  // clean for the spacing of ~0.04 (EstimateNormalLines' figure)
+  const Oriented sphere = NoisySphere(8000, sigma, 11);
   std::vector<V3> normals;
   NormalsReport report;
   report.neighbours = EstimateNormalLines(sphere.positions, normals, &report.noise_figure);
@@ -1738,11 +1745,8 @@ TEST(OrientEstimatedNormals, IsTheBuildsSequenceAndPointsOutward) {
   // A noisy sphere's jet lines, signs scrambled: one call gives every normal outward (the
   // truth, independent of the code) and exactly what the four separate steps give, with the
   // refit above the noise and without it below.
-  Oriented sphere = Sphere(6000, 1.0);
   const double sigma = 0.0025;
-  std::mt19937_64 rng(5);
-  std::normal_distribution<double> gauss(0.0, sigma);
-  for (V3& p : sphere.positions) p += V3(gauss(rng), gauss(rng), gauss(rng));
+  const Oriented sphere = NoisySphere(6000, sigma, 5);
   std::vector<V3> lines;
   NormalsReport fitted;
   fitted.neighbours = EstimateNormalLines(sphere.positions, lines, &fitted.noise_figure);

@@ -1043,6 +1043,7 @@ class SheetGraph {
   explicit SheetGraph(const std::vector<V3>& positions) : cloud_{&positions} {}
   SheetGraph(const SheetGraph&) = delete;
   SheetGraph& operator=(const SheetGraph&) = delete;
+  const std::vector<V3>& positions() const { return *cloud_.points; }
   SheetNeighbours Get() {
     if (!tree_) {
       tree_.emplace(3, cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(10));
@@ -1301,9 +1302,10 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   return flipped;
 }
 
-// FlipSheetsByWinding on `shared`, built over `positions`.
-std::size_t FlipSheetsOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals,
-                         const std::vector<std::uint8_t>& eligible, std::size_t& sheets, std::size_t coarse_fraction) {
+// FlipSheetsByWinding over the positions of `shared`.
+std::size_t FlipSheetsOn(SheetGraph& shared, std::vector<V3>& normals, const std::vector<std::uint8_t>& eligible,
+                         std::size_t& sheets, std::size_t coarse_fraction) {
+  const std::vector<V3>& positions = shared.positions();
   sheets = 0;
   const std::size_t n = positions.size();
   if (normals.size() != n || eligible.size() != n || coarse_fraction < 2) return 0;
@@ -1329,7 +1331,7 @@ std::size_t FlipSheetsByWinding(const std::vector<V3>& positions, std::vector<V3
                                 const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
                                 std::size_t coarse_fraction) {
   SheetGraph shared(positions);
-  return FlipSheetsOn(shared, positions, normals, eligible, sheets, coarse_fraction);
+  return FlipSheetsOn(shared, normals, eligible, sheets, coarse_fraction);
 }
 
 SheetDipoles::SheetDipoles(std::span<const std::uint32_t> samples, const std::vector<V3>& positions,
@@ -1524,9 +1526,10 @@ TreeSigns SignsByTree(const std::vector<V3>& positions, const std::vector<V3>& g
 
 namespace {
 
-// OrientNormals with its sheet passes on `shared`, built over `positions`.
-void OrientOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
-              NormalsReport& report, bool given_are_jet_lines) {
+// OrientNormals over the positions of `shared`, whose graph its sheet passes read.
+void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_majority, NormalsReport& report,
+              bool given_are_jet_lines) {
+  const std::vector<V3>& positions = shared.positions();
   const std::size_t n = positions.size();
   if (n == 0 || normals.size() != n) return;
   const std::vector<V3>& given = normals;
@@ -1643,8 +1646,7 @@ void OrientOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<
       closed[i] = now[c].norm() < detail::kClosedFlux * area[c] ? 1 : 0;
       any = any || closed[i] != 0;
     }
-    if (any)
-      report.sheet_samples = FlipSheetsOn(shared, positions, normals, closed, report.sheets, kSheetCoarseFraction);
+    if (any) report.sheet_samples = FlipSheetsOn(shared, normals, closed, report.sheets, kSheetCoarseFraction);
     // A piece open by its flux may be a closed surface with a sheet inverted as a whole, too large
     // for the pass above (CGAL's spool: one flange's face, 929 of 5,000 samples, reached across
     // its rim 2.5 spacings thick; flux 0.33 of the area, 0.013 once turned). The pass runs again on
@@ -1657,7 +1659,7 @@ void OrientOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<
     std::vector<V3> trial = normals;
     std::size_t trial_sheets = 0;
     if (std::find(open_piece.begin(), open_piece.end(), 1) != open_piece.end() &&
-        FlipSheetsOn(shared, positions, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
+        FlipSheetsOn(shared, trial, open_piece, trial_sheets, kOpenSheetFraction) > 0) {
       std::vector<V3> after(pieces, V3::Zero());
       for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
       std::vector<std::uint8_t> stands(pieces, 0);  // an open piece the trial closes
@@ -1677,14 +1679,13 @@ void OrientOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<
     if ((normals[i].dot(oriented[i]) < 0.0) == (keep[i] != 0)) ++report.flipped;
 }
 
-std::size_t FlipSheetsOnSharpenedLinesOn(SheetGraph& shared, const std::vector<V3>& positions, std::vector<V3>& normals,
-                                         NormalsReport& report) {
+std::size_t FlipSheetsOnSharpenedLinesOn(SheetGraph& shared, std::vector<V3>& normals, NormalsReport& report) {
+  const std::vector<V3>& positions = shared.positions();
   if (report.neighbours != kCleanNormalNeighbours || report.open_components > 0 || positions.empty() ||
       normals.size() != positions.size())
     return 0;
-  report.refined_sheet_samples =
-      FlipSheetsOn(shared, positions, normals, std::vector<std::uint8_t>(positions.size(), 1), report.refined_sheets,
-                   kSheetCoarseFraction);
+  report.refined_sheet_samples = FlipSheetsOn(shared, normals, std::vector<std::uint8_t>(positions.size(), 1),
+                                              report.refined_sheets, kSheetCoarseFraction);
   return report.refined_sheet_samples;
 }
 
@@ -1693,24 +1694,24 @@ std::size_t FlipSheetsOnSharpenedLinesOn(SheetGraph& shared, const std::vector<V
 void OrientNormals(const std::vector<V3>& positions, std::vector<V3>& normals, bool keep_file_majority,
                    NormalsReport& report, bool given_are_jet_lines) {
   SheetGraph shared(positions);
-  OrientOn(shared, positions, normals, keep_file_majority, report, given_are_jet_lines);
+  OrientOn(shared, normals, keep_file_majority, report, given_are_jet_lines);
 }
 
 std::size_t FlipSheetsOnSharpenedLines(const std::vector<V3>& positions, std::vector<V3>& normals,
                                        NormalsReport& report) {
   SheetGraph shared(positions);
-  return FlipSheetsOnSharpenedLinesOn(shared, positions, normals, report);
+  return FlipSheetsOnSharpenedLinesOn(shared, normals, report);
 }
 
 bool OrientEstimatedNormals(const std::vector<V3>& positions, std::vector<V3>& normals, NormalsReport& report,
                             double refit_noise_threshold) {
   if (positions.empty() || normals.size() != positions.size()) return false;
   SheetGraph shared(positions);
-  OrientOn(shared, positions, normals, false, report, true);
+  OrientOn(shared, normals, false, report, true);
   const bool refit = refit_noise_threshold > 0 &&
                      RefitNoisyNormalLines(positions, normals, report, refit_noise_threshold, kDenoiseNeighbours);
   RefineNormalLines(positions, normals, report.neighbours);
-  FlipSheetsOnSharpenedLinesOn(shared, positions, normals, report);
+  FlipSheetsOnSharpenedLinesOn(shared, normals, report);
   return refit;
 }
 
