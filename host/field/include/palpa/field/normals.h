@@ -263,10 +263,20 @@ class SheetDipoles {
 /// nodes 211 -> 45 with the smoothed dipoles and the fine pass (docs/field-methods.md § Normals).
 /// `coarse_fraction`: the coarse cut's sheets hold at most n / coarse_fraction samples (8: the body
 /// is no candidate; OrientNormals' retry on pieces open by their flux allows 4).
+/// `clean_lines`: the lines are a clean set's (OrientNormals: NormalsReport::neighbours is
+/// kCleanNormalNeighbours; FlipSheetsOnSharpenedLines), and the energy adds a facing term: a
+/// wall's two sides face apart or together, never the same way, so each pair of samples that a
+/// two-sheet fit puts on a thin wall's two sides, stacked across it, with parallel lines, costs
+/// its share of their areas while both face the same way (sheets of 8 samples or more). On a
+/// wall a spacing or less thick the probes straddle the wall and score a patch that took the
+/// other side's sign about even (CGAL's rotor, normals stripped, seeds 1-6: far-wrong nodes up to
+/// 1,772 without the term, at most 1 with it; docs/field-methods.md § Thin walls: the two sides
+/// face apart or together). Noisy lines' two-sheet fits pair samples of one surface, so they go
+/// without it.
 /// Returns the samples flipped over both passes; `sheets` the sheets. Unit normals in, same lines out. Deterministic.
 std::size_t FlipSheetsByWinding(const std::vector<Eigen::Vector3d>& positions, std::vector<Eigen::Vector3d>& normals,
                                 const std::vector<std::uint8_t>& eligible, std::size_t& sheets,
-                                std::size_t coarse_fraction = kSheetCoarseFraction);
+                                std::size_t coarse_fraction = kSheetCoarseFraction, bool clean_lines = false);
 
 /// Chooses the sign of every normal (see above): MST propagation per connected component of the
 /// kOrientNeighbours-nearest graph, run on the jet normals (EstimateNormalLines; across a sharp
