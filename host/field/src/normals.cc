@@ -275,11 +275,14 @@ struct SheetCut {
   double chord;
   std::size_t most_fraction;  // a candidate has at most n / most_fraction samples
 };
-// The coarse cut, then a fine one (half the angle and the chord, sheets of at most 1 % of the
-// samples): after the coarse pass the wrong signs left sit in a few samples that the coarse cut
-// joined to right ones (the elk's seed 6: 8 wrong and 1 right, a loss as one sheet).
+// The coarse cut, then a fine one (half the angle and the chord, sheets of up to n / 8 as
+// the coarse cut's): after the coarse pass the wrong signs left sit in samples that the coarse
+// cut joined to right ones (the elk's seed 6: 8 wrong and 1 right, a loss as one sheet). Those
+// can be a whole face: CGAL's 3torus without normals (seed 8) kept a face of 118 samples inward,
+// a sheet of its own under the fine cut but over its old limit of n / 100 (9,490 far-wrong nodes;
+// 31 with n / 8; docs/field-methods.md § Thin walls: the two sides face apart or together).
 constexpr std::array<SheetCut, 2> kSheetCuts{
-    {{30.0, detail::kCoarseSheetSin, 8}, {15.0, detail::kCoarseSheetSin / 2, 100}}};
+    {{30.0, detail::kCoarseSheetSin, 8}, {15.0, detail::kCoarseSheetSin / 2, 8}}};
 // The largest sheet, as a fraction 1 / kOpenSheetFraction of the samples, that the sheet pass may
 // turn on a piece open by its flux (OrientNormals).
 constexpr std::size_t kOpenSheetFraction = 4;

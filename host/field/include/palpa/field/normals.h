@@ -249,7 +249,7 @@ class SheetDipoles {
 /// apart from one another, round after round until no flip lowers it (each sheet at most once; a
 /// round re-scores only the sheets a flip reached; a sheet of more than 256 samples is scored
 /// through SheetDipoles, its flip applied with exact sums). Then a second pass with a finer cut (15
-/// degrees, asin(0.125), sheets of at most n / 100) for the few wrong samples the first cut had
+/// degrees, asin(0.125), sheets of at most n / 8 as well) for the wrong samples the first cut had
 /// joined to right ones. OrientNormals runs it on
 /// the estimated lines of clean samples (NormalsReport::neighbours == kCleanNormalNeighbours), and
 /// of mildly noisy ones (kNormalNeighbours, NormalsReport::noise_figure under 0.2: a part a few
