@@ -1090,6 +1090,13 @@ struct SheetProbeWinding {
   std::optional<SampleProbes> probes;
   std::vector<double> inside, outside;
   std::vector<std::uint8_t> smoothed;  // the near field done at this sample
+  // The facing term's pairs (kFacingWeight), listed at both samples with their weight. They read
+  // only positions, lines and areas, none of which a flip changes, so they outlive `probes`.
+  struct StackedPair {
+    std::uint32_t j;
+    double weight;
+  };
+  std::vector<std::vector<StackedPair>> stacked;
 };
 
 // One pass of FlipSheetsByWinding with the sheets of `cut`.
@@ -1153,17 +1160,16 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   }
   members = {};
   if (candidates.empty()) return 0;
-  // The facing term's pairs (kFacingWeight), listed at both samples with their weight, and each
-  // sample's candidate sheet (-1: none), to tell the pairs that a sheet's flip turns.
-  struct StackedPair {
-    std::uint32_t j;
-    double weight;
-  };
-  std::vector<std::vector<StackedPair>> stacked(facing ? n : 0);
+  // Each sample's candidate sheet (-1: none), to tell the facing term's pairs that a sheet's flip turns.
+  using StackedPair = SheetProbeWinding::StackedPair;
+  std::vector<std::vector<StackedPair>>& stacked = cache.stacked;
   std::vector<std::int32_t> candidate_of(facing ? n : 0, -1);
   if (facing) {
     for (std::size_t c = 0; c < candidates.size(); ++c)
       for (const std::uint32_t i : candidates[c].samples) candidate_of[i] = static_cast<std::int32_t>(c);
+  }
+  if (facing && stacked.empty()) {
+    stacked.resize(n);
     const auto add = [&](std::uint32_t a, std::uint32_t b, double weight) {
       for (StackedPair& pair : stacked[a])
         if (pair.j == b) {
