@@ -543,6 +543,29 @@ TEST(FlipSheetsByWinding, EverySheetThatLowersTheEnergyIsTurnedHoweverManyRounds
   EXPECT_EQ(CountAgainst(normals, sphere.normals), 0u);
 }
 
+TEST(FlipSheetsByWinding, TheFineCutAloneTurnsASheetOfAnEighthOfTheSamples) {
+  // 5,000 samples on a sphere with a cap of about n / 20 inward, and a coarse pass that may turn
+  // only single samples (coarse_fraction n): the fine cut must take the cap. Its old limit of
+  // n / 100 left such a sheet unscored (CGAL's 3torus without normals kept a face of 118 of 5,000
+  // samples inward; kSheetCuts). With n / 100 this fails: no sheet turned (checked).
+  constexpr std::size_t kSamples = 5000;
+  const Oriented sphere = Sphere(kSamples, 1.0);
+  std::vector<V3> normals = sphere.normals;
+  std::size_t cap = 0;
+  for (std::size_t i = 0; i < kSamples; ++i)
+    if (sphere.positions[i].z() > 0.9) {
+      normals[i] = -normals[i];
+      ++cap;
+    }
+  ASSERT_GT(cap, kSamples / 30);
+  ASSERT_LT(cap, kSamples / 8);
+  std::size_t sheets = 0;
+  const std::vector<std::uint8_t> all(kSamples, 1);
+  EXPECT_EQ(FlipSheetsByWinding(sphere.positions, normals, all, sheets, kSamples), cap);
+  EXPECT_EQ(sheets, 1u);
+  EXPECT_EQ(CountAgainst(normals, sphere.normals), 0u);
+}
+
 TEST(FlipSheetsOnSharpenedLines, RunsOnlyWhereTheFirstPassRanOnClosedPieces) {
   // A sphere's sampled normals with a cap of 12 inward: the pass turns it on a clean set whose
   // pieces all closed, and leaves it alone on a noisy set's lines or with a piece open.
