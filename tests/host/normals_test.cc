@@ -1482,6 +1482,27 @@ TEST(FindWindingOutliers, AFlippedNormalIsAnOutlier) {
   EXPECT_LT(found.worst_jump, 0.0);
 }
 
+// A stray point between two parts, facing the nearer one across a narrow gap (CGAL's pinion_small
+// with a point moved 8 voxels out between two teeth, robustness.py seed 9: no warning and 13
+// phantom nodes). The surface in front holds its probes within 0.4 of the gap, where its own disc
+// makes most of the jump: J 0.58, of which the others' share is 0.11. Two spheres of 4,000
+// samples (spacing ~0.056), 0.24 apart; the stray 0.21 in front of one (3.7 spacings), 0.03 from
+// the other and facing it at 35 degrees: J ~0.54, the others' share ~0 (the same sums in numpy).
+// With J alone it passes (checked: none found); every true sample, those facing the gap
+// included, is kept.
+TEST(FindWindingOutliers, AStrayPointFacingASurfaceAcrossANarrowGapIsAnOutlier) {
+  Oriented two = Sphere(4000, 1.0);
+  const Oriented other = Sphere(4000, 1.0, V3(2.24, 0.0, 0.0));
+  two.positions.insert(two.positions.end(), other.positions.begin(), other.positions.end());
+  two.normals.insert(two.normals.end(), other.normals.begin(), other.normals.end());
+  const std::size_t stray = two.positions.size();
+  two.positions.emplace_back(1.21, 0.011, 0.017);
+  two.normals.emplace_back(std::cos(35.0 * std::numbers::pi / 180), std::sin(35.0 * std::numbers::pi / 180), 0.0);
+  const WindingOutliers found = FindWindingOutliers(two.positions, two.normals);
+  ASSERT_EQ(found.indices.size(), 1u);
+  EXPECT_EQ(found.indices[0], stray);
+}
+
 // A wall thinner than the spacing whose one side is a narrow strip (a flange's top face, as on
 // the spool): of each strip sample's 16 nearest, 2 lie on the strip and 14 on the wide side,
 // facing away, each behind the other's tangent plane. Those support it as its own side's samples

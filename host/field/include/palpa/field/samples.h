@@ -95,7 +95,12 @@ struct WindingOutliers {
 /// the disc of area a_i it stands for (a dipole's 1/d^2 would decide the jump alone at small d).
 /// On a sampled surface J ~ 0.8-1 (noise of 1 voxel and 15-degree normal noise keep it above
 /// 0.5); an outlier off the surface sees the same side of it from both probes, J ~ 0.1-0.3, and a
-/// flipped one J < 0. A sample is an outlier when J < min_jump. Deterministic, parallel,
+/// flipped one J < 0. A sample is an outlier when J < min_jump, or when the others' share of J
+/// (J minus its own disc's) is under 0.2, the nearest opposite normal among its 16 nearest lies
+/// in front of it (a narrow gap holds its probes close, and its own disc makes the jump), and the
+/// nearest of its 64 nearest facing its way (n . n_j >= 0.8) lies more behind it than beside it:
+/// a stray point in front of its own side. Either way not when it lies on the plane of its 16
+/// nearest that face its way (a sharp edge's or a fin's true sample). Deterministic, parallel,
 /// O(n log n); fewer than 17 samples: none.
 WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, double min_jump = 0.5);
