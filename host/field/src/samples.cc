@@ -554,7 +554,7 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
   if (n <= kNeighbours || normals.size() != n) return out;
   const SampleProbes probes(positions, normals);
   std::vector<double> jump = probes.Jumps(normals);
-  // The others' share of the jump, J - 2 x the sample's own disc (0 where no probe was placed).
+  // The others' share of the jump, J - 2 x the sample's own disc (1, no test, where no probe was placed).
   std::vector<double> others(n, 1.0);
   if (probes.measured())
     for (std::size_t i = 0; i < n; ++i)

@@ -82,7 +82,7 @@ void RemoveSamples(PointSet& points, const std::vector<std::size_t>& indices);
 /// balls and patch then make phantom solid several voxels deep.
 struct WindingOutliers {
   std::vector<std::size_t> indices;  ///< ascending, into the positions given
-  std::optional<std::size_t> worst;  ///< the one with the smallest jump
+  std::optional<std::size_t> worst;  ///< the one with the smallest jump (or others' share of it)
   double worst_jump = 1.0;
 };
 
