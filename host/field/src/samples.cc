@@ -547,19 +547,19 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
   constexpr double kSureOutlierJump = 0.0;
   constexpr double kLeastOthersJump = 0.2;
   constexpr std::size_t kOwnSideNeighbours = 64;
-  constexpr double kPlaneOffset = 0.2;  // x the 16th neighbour's distance
+  constexpr double kSharesNormalCos = 0.8;  // n . n_j: a neighbour on the sample's own side
+  constexpr double kPlaneOffset = 0.2;      // x the 16th neighbour's distance
   WindingOutliers out;
   const std::size_t n = positions.size();
   constexpr std::size_t kNeighbours = 16;
   if (n <= kNeighbours || normals.size() != n) return out;
   const SampleProbes probes(positions, normals);
   std::vector<double> jump = probes.Jumps(normals);
-  // The others' share of the jump, J - 2 x the sample's own disc (1, no test, where no probe was placed).
-  std::vector<double> others(n, 1.0);
-  if (probes.measured())
-    for (std::size_t i = 0; i < n; ++i)
-      if (const double d = probes.offsets()[i]; d > 0)
-        others[i] = jump[i] - 2.0 * SampleProbes::OwnDisc(probes.areas()[i], d);
+  // The others' share of sample i's jump, J - 2 x its own disc (1, no test, where no probe stands).
+  const auto others = [&](std::size_t i) {
+    const double d = probes.offsets()[i];
+    return d > 0 ? jump[i] - 2.0 * SampleProbes::OwnDisc(probes.areas()[i], d) : 1.0;
+  };
   const detail::PointCloud cloud{&positions};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
@@ -570,7 +570,7 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       const Eigen::Vector3d& p = positions[i];
       const Eigen::Vector3d& nrm = normals[i];
-      if (jump[i] < kSureOutlierJump || !(jump[i] < min_jump || others[i] < kLeastOthersJump)) continue;
+      if (jump[i] < kSureOutlierJump || !(jump[i] < min_jump || others(i) < kLeastOthersJump)) continue;
       const std::size_t got = tree.knnSearch(p.data(), kNeighbours + 1, idx.data(), d2.data());
       if (!(jump[i] < min_jump)) {
         // A stray point facing a surface across a narrow gap: that surface, in front of it, holds
@@ -586,12 +586,12 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
           continue;
         const std::size_t wide_got = tree.knnSearch(p.data(), kOwnSideNeighbours + 1, wide.data(), wide_d2.data());
         const auto own = std::find_if(wide.begin(), wide.begin() + static_cast<std::ptrdiff_t>(wide_got),
-                                      [&](std::size_t j) { return j != i && normals[j].dot(nrm) >= 0.8; });
+                                      [&](std::size_t j) { return j != i && normals[j].dot(nrm) >= kSharesNormalCos; });
         if (own == wide.begin() + static_cast<std::ptrdiff_t>(wide_got)) continue;
         const Eigen::Vector3d behind = p - positions[*own];
         const double along = behind.dot(nrm);
         if (!(along > (behind - along * nrm).norm())) continue;
-        jump[i] = std::max(others[i], kSureOutlierJump);
+        jump[i] = std::max(others(i), kSureOutlierJump);
       }
       // Between the two: next to a sharp edge or a fin the jump of a true sample is low too, but
       // it lies on the plane of the neighbours that share its normal (fandisk: offsets below
@@ -599,7 +599,7 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
       Eigen::Vector3d centre = Eigen::Vector3d::Zero(), mean_normal = Eigen::Vector3d::Zero();
       int agree = 0;
       for (std::size_t m = 0; m < got; ++m) {
-        if (idx[m] == i || normals[idx[m]].dot(nrm) < 0.8) continue;
+        if (idx[m] == i || normals[idx[m]].dot(nrm) < kSharesNormalCos) continue;
         centre += positions[idx[m]];
         mean_normal += normals[idx[m]];
         ++agree;
@@ -609,7 +609,7 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
       const Eigen::Vector3d plane_normal = mean_normal.normalized();
       double noise2 = 0;  // the agreeing neighbours' own mean square offset: noise widens the test
       for (std::size_t m = 0; m < got; ++m) {
-        if (idx[m] == i || normals[idx[m]].dot(nrm) < 0.8) continue;
+        if (idx[m] == i || normals[idx[m]].dot(nrm) < kSharesNormalCos) continue;
         const double o = (positions[idx[m]] - centre).dot(plane_normal);
         noise2 += o * o;
       }
