@@ -265,7 +265,7 @@ int RunBuild(const BuildArgs& args) {
       const double h = grid->voxel_m;
       const field::NoiseSmoothing smoothed = field::SmoothNoisyPositions(
           device.positions, device.normals, field::kDenoiseNeighbours, field::kDenoiseVoxels * h, field::kMovePasses,
-          normals_mode == field::NormalsMode::kEstimate);
+          normals_mode == field::NormalsMode::kEstimate ? normals_report.neighbours : 0);
       // What the moves leave is noise at the sample spacing: one binomial filter of the field
       // averages it (bull, sigma = 1 voxel, the 16-sample move: band mean 0.289 -> 0.271, wrong
       // sign 4.82 -> 4.23 %).
