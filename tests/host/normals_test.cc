@@ -1704,6 +1704,8 @@ TEST(SmoothNoisyPositions, FittedNormalsMoveNoFartherThanTheirFit) {
   const NoiseSmoothing b = SmoothNoisyPositions(as_given, lines, kDenoiseNeighbours, 0.5 * kSigma);
   ASSERT_TRUE(a.Applied());
   ASSERT_TRUE(b.Applied());
+  EXPECT_EQ(a.widest, kMoveFewestNeighbours);
+  EXPECT_EQ(b.widest, kMoveMostNeighbours);
   std::printf("[ wavy sheet ] height RMS off the surface %.5f; moved over 16 %.5f, over 16-64 %.5f\n", rms_off(noisy),
               rms_off(as_fitted), rms_off(as_given));
   // Measured: 0.00458 -> 0.00165 over 16, 0.00194 over 16-64.

@@ -780,6 +780,7 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   };
   out.rms_move = move(kBisectorMaxNeighbours);
   out.passes = std::max(passes, 0);
+  out.widest = kBisectorMaxNeighbours;
   if (fitted_neighbours > 0) {
     // The moves estimate minus each sample's noise, so their RMS stays near the noise (0.9-1.2 x on
     // the bare noisy sets the moves improve). Moves well beyond it follow lines that the fit drew
@@ -801,6 +802,7 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
     std::size_t most = kBisectorMaxNeighbours;
     while (most > kBisectorMinNeighbours && most > static_cast<std::size_t>(fitted_neighbours)) most /= 2;
     if (most != kBisectorMaxNeighbours) out.rms_move = move(most);
+    out.widest = most;
   }
   double total = 0.0;
   for (std::size_t i = 0; i < n; ++i) {

@@ -175,14 +175,15 @@ inline constexpr double kDenoiseVoxels = 0.25;
 
 /// What SmoothNoisyPositions found and did.
 struct NoiseSmoothing {
-  double noise = 0;       ///< the position noise (RMS, units of the positions): the residual's part that
-                          ///< does not grow from the 16- to the `neighbours`-sample fits
-  double residual = 0;    ///< median RMS height residual of the samples' 16-sample quadric fits, same units
-  std::size_t moved = 0;  ///< samples moved (0 when the noise was below the threshold)
-  double mean_move = 0;   ///< mean |move| over the moved samples, all passes, units of the positions
-  int passes = 0;         ///< move passes run (0 when the noise was below the threshold)
-  double rms_move = 0;    ///< RMS |move| over all samples, all passes, units of the positions (also when withheld)
-  bool withheld = false;  ///< the passes ran, but fitted normals' moves exceeded 1.4 x `noise` RMS: undone
+  double noise = 0;        ///< the position noise (RMS, units of the positions): the residual's part that
+                           ///< does not grow from the 16- to the `neighbours`-sample fits
+  double residual = 0;     ///< median RMS height residual of the samples' 16-sample quadric fits, same units
+  std::size_t moved = 0;   ///< samples moved (0 when the noise was below the threshold)
+  double mean_move = 0;    ///< mean |move| over the moved samples, all passes, units of the positions
+  int passes = 0;          ///< move passes run (0 when the noise was below the threshold)
+  double rms_move = 0;     ///< RMS |move| over all samples, all passes, units of the positions (also when withheld)
+  bool withheld = false;   ///< the passes ran, but fitted normals' moves exceeded 1.4 x `noise` RMS: undone
+  std::size_t widest = 0;  ///< the most neighbours a move took: kMoveMostNeighbours, or fewer for fitted normals
   bool Applied() const { return moved > 0; }
 };
 
