@@ -796,7 +796,7 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
     // The fit widened only as far as the noise needed (EstimateNormalLines: 18 neighbours, more
     // while the lines stay rough), and the moves need no wider: beyond it the intervals, as wide
     // as the first residual in every pass, let detail pass for noise and round it off (CGAL's
-    // bear, 0.3 voxel, bare: band mean 0.153 -> 0.141 voxel). Decided on the full move above:
+    // bear, 0.3 voxel, bare: band mean 0.153 -> 0.140 voxel). Decided on the full move above:
     // narrower moves stay short enough to pass where the lines cross the shape (couplingdown,
     // 0.5 voxel, bare: 0.324 -> 0.465 voxel if the narrower moves were the ones asked).
     std::size_t most = kBisectorMaxNeighbours;

@@ -222,9 +222,9 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 /// docs/field-methods.md § Moves larger than the noise). Otherwise the moves are made again over
 /// neighbourhoods no wider than the fit's (the nearest 16, 32 or 64, at least 16): the fit widens
 /// only as far as the noise needs (EstimateNormalLines), and wider moves round off the shape's
-/// detail (docs/field-methods.md § Noise: bare samples move no farther than their normals' fit;
+/// detail (docs/field-methods.md § Bare noisy samples: moves no wider than the normals' fit;
 /// CGAL's bear, cactus, diplodocus and eight, 5,000 bare samples with 0.3 voxel of noise,
-/// 18-neighbour lines: band mean 0.144-0.185 -> 0.136-0.162 voxel). `rms_move` is then the moves
+/// 18-neighbour lines: band mean 0.144-0.184 -> 0.136-0.162 voxel). `rms_move` is then the moves
 /// made. Normals are kept. Shapes: positions and normals of equal length, normals unit; fewer than
 /// `neighbours` + 1 samples or `neighbours` < 8: nothing measured or moved. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
