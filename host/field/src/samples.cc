@@ -8,6 +8,8 @@
 #include <limits>
 #include <numbers>
 #include <numeric>
+#include <optional>
+#include <span>
 #include <vector>
 
 #include <fmt/format.h>
@@ -580,14 +582,14 @@ WindingOutliers FindWindingOutliers(const std::vector<Eigen::Vector3d>& position
         // beside it (there: 4.6 spacings behind, the nearest straight behind). True samples with
         // a share that low lie beside their own side's (CGAL's dino, clean: share 0.19 and -0.03,
         // the nearest facing their way 3 spacings aside and 0.3 behind or 0.2 in front).
-        const auto opposite = std::find_if(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(got),
-                                           [&](std::size_t j) { return normals[j].dot(nrm) < -0.5; });
-        if (opposite == idx.begin() + static_cast<std::ptrdiff_t>(got) || !((positions[*opposite] - p).dot(nrm) > 0))
-          continue;
-        const std::size_t wide_got = tree.knnSearch(p.data(), kOwnSideNeighbours + 1, wide.data(), wide_d2.data());
-        const auto own = std::find_if(wide.begin(), wide.begin() + static_cast<std::ptrdiff_t>(wide_got),
-                                      [&](std::size_t j) { return j != i && normals[j].dot(nrm) >= kSharesNormalCos; });
-        if (own == wide.begin() + static_cast<std::ptrdiff_t>(wide_got)) continue;
+        const std::span near(idx.data(), got);
+        const auto opposite = std::ranges::find_if(near, [&](std::size_t j) { return normals[j].dot(nrm) < -0.5; });
+        if (opposite == near.end() || !((positions[*opposite] - p).dot(nrm) > 0)) continue;
+        const std::span own_side(wide.data(),
+                                 tree.knnSearch(p.data(), kOwnSideNeighbours + 1, wide.data(), wide_d2.data()));
+        const auto own = std::ranges::find_if(
+            own_side, [&](std::size_t j) { return j != i && normals[j].dot(nrm) >= kSharesNormalCos; });
+        if (own == own_side.end()) continue;
         const Eigen::Vector3d behind = p - positions[*own];
         const double along = behind.dot(nrm);
         if (!(along > (behind - along * nrm).norm())) continue;
@@ -761,7 +763,9 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   const std::size_t n = positions.size();
   if (n <= neighbours || normals.size() != n || neighbours < kMinNeighbours) return {};
   const detail::PointCloud cloud{&positions};
-  NoiseSmoothing out = MeasurePositionNoise(positions, normals, neighbours);
+  // The given positions: the measure's, and the first pass's of every move (each starts from them).
+  const detail::KdTree given(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  NoiseSmoothing out = MeasureNoise(positions, normals, given, neighbours);
   if (!(out.noise > threshold)) return out;
   const std::vector<Eigen::Vector3d> before = positions;
   // `passes` Jacobi passes from `before`, each indexing the positions the previous one left; the
@@ -769,10 +773,11 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
   const auto move = [&](std::size_t most) {
     positions = before;
     for (int pass = 0; pass < passes; ++pass) {
-      const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+      std::optional<detail::KdTree> moved;
+      if (pass > 0) moved.emplace(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
       // A move beyond kMaxMoveNoise x the residual is the shape (a detail finer than the
       // neighbours), not noise.
-      BisectorPass(positions, normals, tree, out.residual, kMaxMoveNoise * out.residual, most);
+      BisectorPass(positions, normals, pass == 0 ? given : *moved, out.residual, kMaxMoveNoise * out.residual, most);
     }
     double total2 = 0.0;
     for (std::size_t i = 0; i < n; ++i) total2 += (positions[i] - before[i]).squaredNorm();
