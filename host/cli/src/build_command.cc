@@ -284,13 +284,18 @@ int RunBuild(const BuildArgs& args) {
         fmt::print(stderr,
                    "palpa build: note: {}: position noise {:.3g} mm RMS ({:.2f} voxels): {} samples moved along "
                    "their normals towards the surface their {} nearest samples' positions and normals agree on "
-                   "({} pass{}), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes (--denoise "
-                   "off keeps them)\n",
+                   "({} pass{}{}), {:.2f} voxels on average, and the field filtered once over 3x3x3 nodes "
+                   "(--denoise off keeps them)\n",
                    args.points, smoothed.noise * 1e3, smoothed.noise / h, smoothed.moved,
                    smoothed.widest > field::kMoveFewestNeighbours
                        ? fmt::format("{}-{}", field::kMoveFewestNeighbours, smoothed.widest)
                        : fmt::format("{}", field::kMoveFewestNeighbours),
-                   smoothed.passes, smoothed.passes == 1 ? "" : "es", smoothed.mean_move / h);
+                   smoothed.passes, smoothed.passes == 1 ? "" : "es",
+                   smoothed.scattered == 0 ? ""
+                                           : fmt::format("; {} stayed in the first, their neighbours' offsets "
+                                                         "scattered beyond the noise",
+                                                         smoothed.scattered),
+                   smoothed.mean_move / h);
     }
   }
   field::BuildResult built;
