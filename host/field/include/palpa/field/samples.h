@@ -235,8 +235,10 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 /// only where its 16 nearest agreeing neighbours' offsets scatter by at most kMoveScatter x the
 /// residual: more scatter is lines that do not follow the shape there, a finger or a leg a few
 /// spacings across (CGAL's hand, 0.3 voxel, bare: 0.235 -> 0.189 voxel; `scattered` counts the
-/// first pass's). `rms_move` is then the moves made. Normals are kept. Shapes: positions and normals of equal length,
-/// normals unit; fewer than `neighbours` + 1 samples or `neighbours` < 8: nothing measured or moved. Deterministic.
+/// first pass's; `scatter`, that bound, is a parameter so that tests can lift it with infinity).
+/// `rms_move` is then the moves made. Normals are kept. Shapes: positions and normals of equal
+/// length, normals unit; fewer than `neighbours` + 1 samples or `neighbours` < 8: nothing measured
+/// or moved. Deterministic.
 NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
                                     const std::vector<Eigen::Vector3d>& normals, std::size_t neighbours,
                                     double threshold, int passes = kMovePasses, int fitted_neighbours = 0,
