@@ -823,7 +823,8 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
     // And only where the lines follow the shape: the hand's fingers and the cow's legs, a few
     // spacings across, turn the 18-neighbour lines 10-40 degrees off, and the offsets along them
     // scatter; moved anyway, such samples end farther from the surface (CGAL's hand, 0.3 voxel,
-    // bare: band mean 0.235 -> 0.189 voxel left in place; docs/field-methods.md).
+    // bare: band mean 0.235 -> 0.189 voxel; docs/field-methods.md § Bare noisy samples: a sample
+    // moves only where its neighbours' offsets agree).
     out.rms_move = move(most, scatter * out.residual);
     out.widest = most;
   }
