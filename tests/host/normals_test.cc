@@ -1751,15 +1751,16 @@ TEST(SmoothNoisyPositions, FittedNormalsStayWhereTheirNeighboursOffsetsScatter) 
                                                 std::numeric_limits<double>::infinity());
   ASSERT_TRUE(a.Applied());
   ASSERT_TRUE(b.Applied());
-  // The samples that stayed in the first pass lie on the rim: their mean |z| against everyone's.
+  // The samples that stayed in every pass lie on the rim: their mean |z| against everyone's.
   double z_stayed = 0.0, z_all = 0.0;
+  std::size_t stayed = 0;
   for (std::size_t i = 0; i < noisy.size(); ++i) {
     const double z = std::abs(noisy[i].z());
     z_all += z;
-    if (bounded[i] == noisy[i]) z_stayed += z;
+    if (bounded[i] != noisy[i]) continue;
+    z_stayed += z;
+    ++stayed;
   }
-  std::size_t stayed = 0;
-  for (std::size_t i = 0; i < noisy.size(); ++i) stayed += bounded[i] == noisy[i];
   std::printf(
       "[ thin ellipsoid ] fit %d; first pass stayed %zu, all passes %zu; mean |z| %.4f of those, %.4f of all; "
       "RMS off the surface %.5f -> %.5f (moved everywhere %.5f)\n",

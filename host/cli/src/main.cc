@@ -70,7 +70,8 @@ int main(int argc, char** argv) {
           "--denoise", b.denoise,
           fmt::format("auto: when the samples' position noise exceeds a quarter voxel RMS, move each "
                       "along its normal towards the surface its {}-{} nearest samples agree on ({} passes; along "
-                      "estimated normals, no more than their fit used), then filter the field once over 3x3x3 nodes; "
+                      "estimated normals, no more than their fit used, and not where the neighbours' offsets scatter "
+                      "beyond the noise), then filter the field once over 3x3x3 nodes; "
                       "estimated normals whose moves exceed 1.4x the noise RMS leave the samples in place and only "
                       "filter (default); off: never",
                       palpa::field::kMoveFewestNeighbours, palpa::field::kMoveMostNeighbours,

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <iterator>
@@ -714,7 +715,7 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
                          const detail::KdTree& tree, double noise, double cap, std::size_t most, double scatter) {
   const std::size_t n = positions.size();
   std::vector<double> move(n, std::numeric_limits<double>::quiet_NaN());
-  std::vector<std::uint8_t> stayed(n, 0);
+  std::atomic<std::size_t> stayed{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
     std::array<std::size_t, kBisectorMaxNeighbours + 1> idx{};
     std::array<double, kBisectorMaxNeighbours + 1> d2{};
@@ -742,7 +743,7 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
         // Noise alone scatters the offsets by about the residual; fitted lines that do not follow
         // the shape scatter them more, and their mean is not the surface.
         if (scatter > 0 && std::isnan(chosen) && sum2 - sum * sum / used > scatter * scatter * (used - 1)) {
-          stayed[i] = 1;
+          stayed.fetch_add(1, std::memory_order_relaxed);
           break;
         }
         const double mean = sum / used, half = kIciWidth * noise / std::sqrt(static_cast<double>(used));
@@ -756,7 +757,7 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
   });
   for (std::size_t i = 0; i < n; ++i)
     if (!std::isnan(move[i])) positions[i] += move[i] * normals[i];
-  return static_cast<std::size_t>(std::count(stayed.begin(), stayed.end(), std::uint8_t{1}));
+  return stayed.load();
 }
 
 }  // namespace

@@ -190,7 +190,7 @@ struct NoiseSmoothing {
   bool withheld = false;      ///< the passes ran, but fitted normals' moves exceeded 1.4 x `noise` RMS: undone
   std::size_t widest = 0;     ///< the most neighbours a move took: kMoveMostNeighbours, or fewer for fitted normals
   std::size_t scattered = 0;  ///< fitted normals: samples left in place in the first pass, their neighbours'
-                              ///< offsets scattered beyond kMoveScatter (0 for given normals)
+                              ///< offsets scattered beyond `scatter` x `residual` (0 for given normals)
   bool Applied() const { return moved > 0; }
 };
 
@@ -231,11 +231,11 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 /// only as far as the noise needs (EstimateNormalLines), and wider moves round off the shape's
 /// detail (docs/field-methods.md § Bare noisy samples: moves no wider than the normals' fit;
 /// CGAL's bear, cactus, diplodocus and eight, 5,000 bare samples with 0.3 voxel of noise,
-/// 18-neighbour lines: band mean 0.144-0.184 -> 0.136-0.162 voxel), and a sample moves in a pass
-/// only where its 16 nearest agreeing neighbours' offsets scatter by at most kMoveScatter x the
-/// residual: more scatter is lines that do not follow the shape there, a finger or a leg a few
+/// 18-neighbour lines: band mean 0.144-0.184 -> 0.136-0.162 voxel). In those moves a sample moves
+/// in a pass only where its 16 nearest agreeing neighbours' offsets scatter by at most `scatter` x
+/// the residual: more scatter is lines that do not follow the shape there, a finger or a leg a few
 /// spacings across (CGAL's hand, 0.3 voxel, bare: 0.235 -> 0.189 voxel; `scattered` counts the
-/// first pass's; `scatter`, that bound, is a parameter so that tests can lift it with infinity).
+/// first pass's; infinity lifts the bound).
 /// `rms_move` is then the moves made. Normals are kept. Shapes: positions and normals of equal
 /// length, normals unit; fewer than `neighbours` + 1 samples or `neighbours` < 8: nothing measured
 /// or moved. Deterministic.
