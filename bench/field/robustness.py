@@ -14,9 +14,9 @@ an open scan, one side never scanned: the samples whose normal points away from 
 100 deg dropped; the normals stripped, which palpa then estimates and orients, from the clean
 positions and from the 0.5-voxel noisy ones (a real bare scan; judged as noise), and from a 0.3-voxel
 draw (noisy for the grid, clean for the spacing; judged as noise); the 0.5-voxel draw with its
-normals turned as in the normal-noise row (a scanner's estimated normals; judged as noise); virtual range scans
-from 6 views on the upper hemisphere, `palpa sample --views 6`, without and with range noise of 0.5
-voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
+normals turned as in the normal-noise row (a scanner's estimated normals; judged as noise);
+virtual range scans from 6 views on the upper hemisphere, `palpa sample --views 6`, without and
+with range noise of 0.5 voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
 band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|true| > 3: phantom
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
