@@ -708,9 +708,9 @@ NoiseSmoothing MeasureNoise(const std::vector<Eigen::Vector3d>& positions, const
 
 // One Jacobi pass of the bisector move: the offset of each sample along its normal, from the
 // positions as they were (`tree` indexes them); `noise` sets the confidence intervals, `cap`
-// bounds each move, and no neighbourhood holds more than the nearest `most`. `scatter` > 0: a
-// sample whose smallest neighbourhood's offsets scatter more than that (RMS about their mean)
-// stays. Returns the samples that stayed so.
+// bounds each move, and no neighbourhood holds more than the nearest `most`. A sample whose
+// smallest neighbourhood's offsets scatter more than `scatter` (RMS about their mean; infinity:
+// never) stays. Returns the samples that stayed so.
 std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vector<Eigen::Vector3d>& normals,
                          const detail::KdTree& tree, double noise, double cap, std::size_t most, double scatter) {
   const std::size_t n = positions.size();
@@ -742,7 +742,7 @@ std::size_t BisectorPass(std::vector<Eigen::Vector3d>& positions, const std::vec
         if (used < 2) continue;
         // Noise alone scatters the offsets by about the residual; fitted lines that do not follow
         // the shape scatter them more, and their mean is not the surface.
-        if (scatter > 0 && std::isnan(chosen) && sum2 - sum * sum / used > scatter * scatter * (used - 1)) {
+        if (std::isnan(chosen) && sum2 - sum * sum / used > scatter * scatter * (used - 1)) {
           stayed.fetch_add(1, std::memory_order_relaxed);
           break;
         }
@@ -798,7 +798,7 @@ NoiseSmoothing SmoothNoisyPositions(std::vector<Eigen::Vector3d>& positions,
     for (std::size_t i = 0; i < n; ++i) total2 += (positions[i] - before[i]).squaredNorm();
     return std::sqrt(total2 / static_cast<double>(n));
   };
-  out.rms_move = move(kBisectorMaxNeighbours, 0.0);
+  out.rms_move = move(kBisectorMaxNeighbours, std::numeric_limits<double>::infinity());
   out.passes = std::max(passes, 0);
   out.widest = kBisectorMaxNeighbours;
   if (fitted_neighbours > 0) {

@@ -235,7 +235,7 @@ NoiseSmoothing MeasurePositionNoise(const std::vector<Eigen::Vector3d>& position
 /// in a pass only where its 16 nearest agreeing neighbours' offsets scatter by at most `scatter` x
 /// the residual: more scatter is lines that do not follow the shape there, a finger or a leg a few
 /// spacings across (CGAL's hand, 0.3 voxel, bare: 0.235 -> 0.189 voxel; `scattered` counts the
-/// first pass's; infinity lifts the bound).
+/// first pass's; `scatter` > 0, and infinity lifts the bound).
 /// `rms_move` is then the moves made. Normals are kept. Shapes: positions and normals of equal
 /// length, normals unit; fewer than `neighbours` + 1 samples or `neighbours` < 8: nothing measured
 /// or moved. Deterministic.
