@@ -126,6 +126,13 @@ constexpr std::size_t kClosingBalls = 16;
 // ball's radius. A sphere's balls pass at 30 and 60 degrees; a flat wall's, a hole's or a cut
 // cylinder's (a wrist or a hub, cut flat) do not: the ball there is not the surface's curvature
 // but the size of the unscanned space (joint's open scan: 476,426 -> 100,859 far-wrong nodes).
+// And the normal found there must have turned past halfway from the sample's towards the
+// ball's radius (nearer the radius than the sample's normal): the surface bends at least about
+// half as much as the ball. Without it, on sparse samples a flat wall's own sample passed the 30
+// degree probe within the tolerance (its normal is 30 degrees off the radius) and another surface
+// the 60 degree one, and a plate's side balls closed a dome under its unscanned edge (CGAL's
+// eight, open scan: 1,463 -> 1,059 far-wrong nodes; joint 100,859 -> 58,590; docs/field-methods.md
+// § Open sides: a ball continues only a surface that turns with it).
 constexpr std::array<double, 2> kContinueDegrees = {30.0, 60.0};
 constexpr int kContinueSectors = 8;
 constexpr double kContinueTolSpacings = 0.5;
@@ -963,7 +970,7 @@ class ClosingRule {
             std::size_t j = 0;
             double d2 = 0.0;
             return tree.knnSearch(probe.data(), 1, &j, &d2) > 0 && std::sqrt(d2) <= tol &&
-                   normals[j].dot(u) >= kContinueCos;
+                   normals[j].dot(u) >= kContinueCos && normals[j].dot(u) > normals[j].dot(n);
           });
           if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
         }
