@@ -969,8 +969,9 @@ class ClosingRule {
             const V3 probe = inner.centres[i] + r * u;
             std::size_t j = 0;
             double d2 = 0.0;
-            return tree.knnSearch(probe.data(), 1, &j, &d2) > 0 && std::sqrt(d2) <= tol &&
-                   normals[j].dot(u) >= kContinueCos && normals[j].dot(u) > normals[j].dot(n);
+            if (tree.knnSearch(probe.data(), 1, &j, &d2) == 0 || !(std::sqrt(d2) <= tol)) return false;
+            const double along = normals[j].dot(u);  // turned towards the radius, past halfway
+            return along >= kContinueCos && along > normals[j].dot(n);
           });
           if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
         }
