@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <optional>
 #include <span>
@@ -116,7 +117,19 @@ constexpr double kEdgeLeanWinding = 0.02;
 constexpr double kContactCos = -0.5;
 // ... and w there at least 1/2 + this (w 0.58-0.70 in the cow's rump beside its tail).
 constexpr double kContactWinding = 0.05;
-// Inner balls tried per query (those of the samples nearest it).
+// Inner balls tried per query (those of the samples nearest it). Where none of them holds the
+// point, every medial ball that does is asked (ClosingRule::BallPhi): one that continues the
+// surface (Continues) and touches it again at its antipode, a sample there within the probes'
+// tolerance whose normal lies within acos(kContinueCos) of the opposite of the ball's sample's.
+// The part's far side was scanned, the ball spans the part, and the part goes on round it. A
+// part's unscanned side can lie nearer other parts' samples than its own: the spool's hub
+// scanned from above, whose lower half's nearest samples all lie on the flanges' inner faces
+// (their balls stop at the flanges), while the balls of the hub's sides span the hub (open scan:
+// 16,465 -> 10,189 far-wrong nodes, with the far pass's open-side rule; Poisson 9,663). Without
+// the antipode, any ball that continues the surface domed the flat, unscanned underside of
+// a curved part (CGAL's anchor, open scan, seed 13: 41,660 -> 57,152; with it 41,660) and the
+// outer round's balls filled the joint's bore (58,590 -> 72,084; with it 58,606).
+// docs/field-methods.md § Open sides: every medial ball that holds a node.
 constexpr std::size_t kClosingBalls = 16;
 // A ball closes a point only where it continues the scanned surface (ClosingRule::Continues): on
 // the far side of its sample from the point, the surface lies on the ball kContinueDegrees[k]
@@ -941,7 +954,8 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
 // or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
-// samples nearest it that continues the surface towards it (Continues). Unclear is
+// samples nearest it that continues the surface towards it (Continues), or where none of those
+// holds it, within any medial ball that does (kClosingBalls). Unclear is
 // w >= kBallClosingWinding, or w >= kRimClosingWinding where the nearest sample lies on a rim
 // (RimSamples): past an open side's rim w falls towards 0.2 on the missing part (a sphere scanned
 // above -0.17 R: 0.18 at its lowest point), and only there do the rim's balls continue the
@@ -949,10 +963,17 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 class ClosingRule {
  public:
   // `spacing`: SampleSpacing of `positions`. Probes every ball once (kContinueSectors x
-  // kContinueDegrees nearest-sample queries per sample).
+  // kContinueDegrees nearest-sample queries per sample, one more at the antipode where those pass).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
               const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing)
-      : tree_(tree), inner_(inner), rim_(rim), positions_(positions), normals_(normals), sectors_(inner.radii.size()) {
+      : tree_(tree),
+        inner_(inner),
+        rim_(rim),
+        positions_(positions),
+        normals_(normals),
+        sectors_(inner.radii.size()),
+        medial_(inner.radii.size(), 0),
+        far_centres_{&far_centre_points_} {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const V3& n = normals[i];
@@ -976,8 +997,29 @@ class ClosingRule {
           if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
         }
         sectors_[i] = mask;
+        if (mask == 0) continue;
+        // The antipode: a sample within the tolerance of the ball's far point, its normal within
+        // acos(kContinueCos) of -n.
+        const V3 antipode = inner.centres[i] - r * n;
+        std::size_t j = 0;
+        double d2 = 0.0;
+        medial_[i] = tree.knnSearch(antipode.data(), 1, &j, &d2) > 0 && std::sqrt(d2) <= tol &&
+                             -normals[j].dot(n) >= kContinueCos
+                         ? 1
+                         : 0;
       }
     });
+    // Only those can close a point beyond the nearest; a flat face's balls (a cube's: radius up to
+    // r_max) never are, and would make every search long.
+    for (std::size_t i = 0; i < medial_.size(); ++i) {
+      if (medial_[i] == 0 || !std::isfinite(inner.radii[i])) continue;
+      far_balls_.push_back(i);
+      far_centre_points_.push_back(inner.centres[i]);
+      largest_radius_ = std::max(largest_radius_, inner.radii[i]);
+    }
+    if (!far_balls_.empty())
+      far_tree_ =
+          std::make_unique<KdTree>(3, far_centres_, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   }
   struct Balls {
     double phi = std::numeric_limits<double>::infinity();  // metres; +infinity: the test does not apply
@@ -1000,6 +1042,11 @@ class ClosingRule {
       const double phi = (p - inner_.centres[i]).norm() - inner_.radii[i];
       if (phi < best && (phi >= 0.0 || Continues(i, p))) best = phi;
     }
+    if (!(best < 0.0) && far_tree_) {  // every medial ball that holds p (kClosingBalls)
+      DeepestContinuing deepest(*this, p, largest_radius_);
+      far_tree_->findNeighbors(deepest, p.data(), nanoflann::SearchParams());
+      best = std::min(best, deepest.phi());
+    }
     return {best, threshold};
   }
   bool Inside(double w, const V3& p) const { return w >= 0.5 || BallPhi(w, p).phi < 0.0; }
@@ -1020,12 +1067,43 @@ class ClosingRule {
     return ((mask >> k) & 1u) != 0;
   }
 
+  // nanoflann result set over the medial balls' centres within the largest radius: the deepest
+  // ball that holds p and continues the surface towards it (the minimum, in any visiting order).
+  class DeepestContinuing {
+   public:
+    DeepestContinuing(const ClosingRule& rule, const V3& p, double radius)
+        : rule_(rule), p_(p), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+    void init() {}
+    void clear() {}
+    std::size_t size() const { return phi_ < 0.0 ? 1 : 0; }
+    bool full() const { return true; }
+    double worstDist() const { return bound_sq_; }
+    bool addPoint(double dist_sq, std::size_t m) {
+      const std::size_t i = rule_.far_balls_[m];
+      const double phi = std::sqrt(dist_sq) - rule_.inner_.radii[i];
+      if (phi < std::min(phi_, 0.0) && rule_.Continues(i, p_)) phi_ = phi;
+      return true;
+    }
+    double phi() const { return phi_; }
+
+   private:
+    const ClosingRule& rule_;
+    const V3& p_;
+    double bound_sq_;
+    double phi_ = std::numeric_limits<double>::infinity();
+  };
   const KdTree& tree_;
   const Packing& inner_;
   const std::vector<std::uint8_t>& rim_;
   const std::vector<V3>& positions_;
   const std::vector<V3>& normals_;
-  std::vector<std::uint8_t> sectors_;  // bit k: the ball lies on the surface in sector k (Continues)
+  std::vector<std::uint8_t> sectors_;   // bit k: the ball lies on the surface in sector k (Continues)
+  std::vector<std::uint8_t> medial_;    // 1: the ball continues the surface and touches it at its antipode
+  std::vector<std::size_t> far_balls_;  // the medial balls, for far_tree_
+  std::vector<V3> far_centre_points_;   // their centres
+  PointCloud far_centres_;
+  std::unique_ptr<KdTree> far_tree_;  // over far_centres_; null when there are none
+  double largest_radius_ = 0.0;       // metres, of far_balls_
 };
 
 // HermiteStats::closure_beyond_grid: the lattice of half a brick past `grid`, within `reach_m` of
@@ -1402,6 +1480,12 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The far pass's filter passes a node held inside whose interpolated w is under this: 1/2, and
   // on a closed set kDiscPointMax (the disc rule examines it).
   const float inside_min = closed_set ? kDiscPointMax : 0.5f;
+  // ... and a node held outside whose interpolated w is at least this: 1/2 - kFilterMargin, and on
+  // an open set kRimClosingWinding - kFilterMargin, where the closing rule may hold it inside. The
+  // estimate had cut an open side's closure short: it carries the scanned patches on, and w below
+  // 1/2 did not overrule it (the spool's open scan: 8,678 of its 14,127 hole nodes lay in bricks
+  // the estimate evaluated).
+  const float outside_max = (closed_set ? 0.5f : static_cast<float>(kRimClosingWinding)) - kFilterMargin;
   const std::vector<double> levels =
       closed_set ? SampleProbes(positions, normals).Levels(normals) : std::vector<double>{};
   // The change to w when the nearest samples' dipoles are spread over their discs (radius
@@ -1577,9 +1661,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           for (int e = 0; e < kB; ++e) {
             const float x = values[(a * kB + c) * kB + e];
             // Skipped where the filter's w agrees with the estimate clearly enough: held inside, w
-            // at least inside_min; held outside, w under 1/2 - kFilterMargin.
+            // at least inside_min; held outside, w under outside_max.
             const float we = wi[static_cast<std::size_t>(e)];
-            if (x <= 0.0f ? we >= inside_min : we < 0.5f - kFilterMargin) continue;
+            if (x <= 0.0f ? we >= inside_min : we < outside_max) continue;
             const V3 p = node_at(bi * kB + a, bj * kB + c, bk * kB + e);
             AnyWithin near(trust);  // the nearest sample within trust?
             wide.findNeighbors(near, p.data(), nanoflann::SearchParams());
@@ -1604,6 +1688,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             ++local;
             // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
             if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
+            continue;
+          }
+        }
+        if (!closed_set && x > 0.0f && w < 0.5) {  // an open side the rule closes (outside_max)
+          if (const double phi = rule.BallPhi(w, p).phi; phi < 0.0) {
+            x = -std::min(band, std::max(1e-6f, static_cast<float>(-phi / h)));
+            ++local;
             continue;
           }
         }
