@@ -1021,6 +1021,9 @@ class ClosingRule {
       far_tree_ =
           std::make_unique<KdTree>(3, far_centres_, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
   }
+  // far_tree_ points into this object's own members: neither copied nor moved.
+  ClosingRule(const ClosingRule&) = delete;
+  ClosingRule& operator=(const ClosingRule&) = delete;
   struct Balls {
     double phi = std::numeric_limits<double>::infinity();  // metres; +infinity: the test does not apply
     double threshold = kBallClosingWinding;                // the w below which the balls do not close
