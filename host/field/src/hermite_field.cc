@@ -972,14 +972,23 @@ class ClosingRule {
         positions_(positions),
         normals_(normals),
         sectors_(inner.radii.size()),
-        medial_(inner.radii.size(), 0),
         far_centres_{&far_centre_points_} {
+    std::vector<std::uint8_t> medial(sectors_.size(), 0);  // the ball also touches the surface at its antipode
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const V3& n = normals[i];
         const auto [e1, e2] = detail::AngleFrame(n);
         const double r = inner.radii[i];
         const double tol = kContinueTolSpacings * spacing[i] + kContinueTolRadius * r;
+        // The surface at the ball's point in radius direction u: the nearest sample's normal, if
+        // that sample lies within tol of the point.
+        const auto normal_at = [&](const V3& u) -> std::optional<V3> {
+          const V3 probe = inner.centres[i] + r * u;
+          std::size_t j = 0;
+          double d2 = 0.0;
+          if (tree.knnSearch(probe.data(), 1, &j, &d2) == 0 || !(std::sqrt(d2) <= tol)) return std::nullopt;
+          return normals[j];
+        };
         std::uint8_t mask = 0;
         for (int k = 0; k < kContinueSectors; ++k) {
           const double around = 2.0 * std::numbers::pi * k / kContinueSectors;
@@ -987,32 +996,24 @@ class ClosingRule {
           const bool on_ball = std::all_of(kContinueDegrees.begin(), kContinueDegrees.end(), [&](double degrees) {
             const double arc = degrees * std::numbers::pi / 180.0;
             const V3 u = std::cos(arc) * n + std::sin(arc) * t;  // the probe's radius direction
-            const V3 probe = inner.centres[i] + r * u;
-            std::size_t j = 0;
-            double d2 = 0.0;
-            if (tree.knnSearch(probe.data(), 1, &j, &d2) == 0 || !(std::sqrt(d2) <= tol)) return false;
-            const double along = normals[j].dot(u);  // turned towards the radius, past halfway
-            return along >= kContinueCos && along > normals[j].dot(n);
+            const std::optional<V3> found = normal_at(u);
+            if (!found) return false;
+            const double along = found->dot(u);  // turned towards the radius, past halfway
+            return along >= kContinueCos && along > found->dot(n);
           });
           if (on_ball) mask = static_cast<std::uint8_t>(mask | (1u << k));
         }
         sectors_[i] = mask;
         if (mask == 0) continue;
-        // The antipode: a sample within the tolerance of the ball's far point, its normal within
-        // acos(kContinueCos) of -n.
-        const V3 antipode = inner.centres[i] - r * n;
-        std::size_t j = 0;
-        double d2 = 0.0;
-        medial_[i] = tree.knnSearch(antipode.data(), 1, &j, &d2) > 0 && std::sqrt(d2) <= tol &&
-                             -normals[j].dot(n) >= kContinueCos
-                         ? 1
-                         : 0;
+        // The antipode, -n from the centre: its normal within acos(kContinueCos) of -n.
+        const std::optional<V3> far_side = normal_at(V3(-n));
+        medial[i] = far_side && -far_side->dot(n) >= kContinueCos ? 1 : 0;
       }
     });
     // Only those can close a point beyond the nearest; a flat face's balls (a cube's: radius up to
     // r_max) never are, and would make every search long.
-    for (std::size_t i = 0; i < medial_.size(); ++i) {
-      if (medial_[i] == 0 || !std::isfinite(inner.radii[i])) continue;
+    for (std::size_t i = 0; i < medial.size(); ++i) {
+      if (medial[i] == 0 || !std::isfinite(inner.radii[i])) continue;
       far_balls_.push_back(i);
       far_centre_points_.push_back(inner.centres[i]);
       largest_radius_ = std::max(largest_radius_, inner.radii[i]);
@@ -1101,8 +1102,7 @@ class ClosingRule {
   const std::vector<V3>& positions_;
   const std::vector<V3>& normals_;
   std::vector<std::uint8_t> sectors_;   // bit k: the ball lies on the surface in sector k (Continues)
-  std::vector<std::uint8_t> medial_;    // 1: the ball continues the surface and touches it at its antipode
-  std::vector<std::size_t> far_balls_;  // the medial balls, for far_tree_
+  std::vector<std::size_t> far_balls_;  // the medial balls (kClosingBalls), for far_tree_
   std::vector<V3> far_centre_points_;   // their centres
   PointCloud far_centres_;
   std::unique_ptr<KdTree> far_tree_;  // over far_centres_; null when there are none
