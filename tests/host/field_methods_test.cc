@@ -1141,11 +1141,12 @@ TEST(Winding, OpenScanWallsBallsCloseOnlyASurfaceThatTurnsWithThem) {
 // own balls. The spool scanned from above: the lower half of its hub, between the flanges, lies
 // nearer the flanges' inner faces than the hub's samples, and the flanges' balls stop at the
 // flanges; the balls of the hub's sides span the hub (they touch its far side, scanned too), hold
-// the lower half and continue the hub round. 14,127 hole nodes before, 7,837 now; the phantom
-// solid stays (2,421 -> 2,434).
+// the lower half and continue the hub round. 14,127 hole nodes before, 7,837 with the medial balls;
+// the phantom solid stays (2,421 -> 2,434). The far pass asks the balls also where the estimate
+// holds a node outside and w is unclear but at least 1/2 (thirty-sixth session): 6,590.
 TEST(Winding, OpenScanHubIsClosedByItsOwnBallsBetweenFlanges) {
   const mesh::EvalResult r = ScoreOpenScan("spool.off");
-  EXPECT_LE(r.holes.nodes, 10000u) << "deepest " << r.holes.deepest_voxels << " voxels";
+  EXPECT_LE(r.holes.nodes, 7500u) << "deepest " << r.holes.deepest_voxels << " voxels";
   EXPECT_LE(r.phantom_solid.nodes, 3000u) << "deepest " << r.phantom_solid.deepest_voxels << " voxels";
 }
 

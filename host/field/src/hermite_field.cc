@@ -125,7 +125,8 @@ constexpr double kContactWinding = 0.05;
 // part's unscanned side can lie nearer other parts' samples than its own: the spool's hub
 // scanned from above, whose lower half's nearest samples all lie on the flanges' inner faces
 // (their balls stop at the flanges), while the balls of the hub's sides span the hub (open scan:
-// 16,465 -> 10,189 far-wrong nodes, with the far pass's open-side rule; Poisson 9,663). Without
+// 16,465 -> 10,189 far-wrong nodes, with the far pass's open-side rule, 8,920 with that rule up to
+// w < 0.7; Poisson 9,663). Without
 // the antipode, any ball that continues the surface domed the flat, unscanned underside of
 // a curved part (CGAL's anchor, open scan, seed 13: 41,660 -> 57,152; with it 41,660) and the
 // outer round's balls filled the joint's bore (58,590 -> 72,084; with it 58,606).
@@ -1030,8 +1031,11 @@ class ClosingRule {
     double threshold = kBallClosingWinding;                // the w below which the balls do not close
   };
   // Signed distance to the union of the inner balls of the samples nearest p, where w is unclear.
-  Balls BallPhi(double w, const V3& p) const {
-    if (w >= 0.5 || w < kRimClosingWinding) return {};
+  Balls BallPhi(double w, const V3& p) const { return w >= 0.5 ? Balls{} : BallsAt(w, p); }
+  // BallPhi at w >= 1/2 as well (down to kRimClosingWinding): for the far pass, where the local
+  // estimate holds a node outside on an open side and w leans inside but is unclear.
+  Balls BallsAt(double w, const V3& p) const {
+    if (w < kRimClosingWinding) return {};
     std::array<std::size_t, kClosingBalls> idx{};
     std::array<double, kClosingBalls> d2{};
     const std::size_t got = tree_.knnSearch(p.data(), kClosingBalls, idx.data(), d2.data());
@@ -1694,8 +1698,12 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             continue;
           }
         }
-        if (!closed_set && x > 0.0f && w < 0.5) {  // an open side the rule closes (outside_max)
-          if (const double phi = rule.BallPhi(w, p).phi; phi < 0.0) {
+        // An open side the rule closes (outside_max), also where w leans inside but is unclear:
+        // the unclear rules below are built for closed sets and let the estimate's outside stand
+        // (the spool's open scan: 7,838 hole nodes under its hub, w 0.50-0.56, a medial ball
+        // holding them; 6,569 with the balls asked there too, Poisson's far-wrong total 9,663).
+        if (!closed_set && x > 0.0f && w < 0.5 + kWindingClear) {
+          if (const double phi = rule.BallsAt(w, p).phi; phi < 0.0) {
             x = -std::min(band, std::max(1e-6f, static_cast<float>(-phi / h)));
             ++local;
             continue;

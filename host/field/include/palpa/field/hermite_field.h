@@ -40,7 +40,8 @@
 // w is unclear (0.3 <= w < 1/2, or down to 0.1 behind a rim sample: an open scan's missing side)
 // the inner balls of the nearest samples decide (or, where none holds the node, any ball that
 // continues its surface and touches it again at its antipode; on an open set this overrules the
-// estimate's outside too), so the closure continues the scanned curvature (closure_beyond_grid).
+// estimate's outside too, there up to w < 0.7), so the closure continues the scanned curvature
+// (closure_beyond_grid).
 // Last SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the
 // proxy's sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
 // patches meet or the bracket clamps.
