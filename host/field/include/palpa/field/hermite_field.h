@@ -41,7 +41,9 @@
 // the inner balls of the nearest samples decide (or, where none holds the node, any ball that
 // continues its surface and touches it again at its antipode; on an open set this overrules the
 // estimate's outside too, there up to w < 0.7), so the closure continues the scanned curvature
-// (closure_beyond_grid).
+// (closure_beyond_grid); and on an open set, where no ball holds a node the estimate holds inside
+// and its nearest sample is a rim sample 1.5 of its spacings away or more, w's outside decides
+// (the estimate carried the scanned patches on past the scan's edge).
 // Last SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the
 // proxy's sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
 // patches meet or the bracket clamps.
