@@ -126,10 +126,10 @@ constexpr double kContactWinding = 0.05;
 // scanned from above, whose lower half's nearest samples all lie on the flanges' inner faces
 // (their balls stop at the flanges), while the balls of the hub's sides span the hub (open scan:
 // 16,465 -> 10,189 far-wrong nodes, with the far pass's open-side rule, 8,920 with that rule up to
-// w < 0.7; Poisson 9,663). Without
-// the antipode, any ball that continues the surface domed the flat, unscanned underside of
-// a curved part (CGAL's anchor, open scan, seed 13: 41,660 -> 57,152; with it 41,660) and the
-// outer round's balls filled the joint's bore (58,590 -> 72,084; with it 58,606).
+// w < 0.7; Poisson 9,663). Without the antipode, any ball that continues the surface domed the
+// flat, unscanned underside of a curved part (CGAL's anchor, open scan, seed 13: 41,660 -> 57,152;
+// with it 41,660) and the outer round's balls filled the joint's bore (58,590 -> 72,084; with it
+// 58,606).
 // docs/field-methods.md § Open sides: every medial ball that holds a node.
 constexpr std::size_t kClosingBalls = 16;
 // A ball closes a point only where it continues the scanned surface (ClosingRule::Continues): on
@@ -1723,17 +1723,19 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         if ((w >= 0.5) == (x <= 0.0f)) continue;
         std::size_t idx = 0;
         double d2 = 0.0;
+        bool found = false;  // idx and d2 hold the nearest sample
         const bool unclear_w = std::abs(w - 0.5) <= kWindingClear;
-        // Closed by a rim's balls. Asked of an unclear w on open sets only (below).
+        // Closed by a rim's balls (asked of an unclear w on open sets only, below).
         const bool held_in = x <= 0.0f && (!unclear_w || !closed_set) && rule.Inside(w, p);
         if (unclear_w) {
-          // On an open set, the estimate's inside that no ball holds, w unclear, the nearest
-          // sample a rim sample kCarrySpacings of its spacing away or more: the estimate carried
-          // the scanned patches on past the scan's edge (a wrist cut flat, a part's unscanned
-          // underside); w's outside decides, as where w is clear (kCarrySpacings).
+          // On an open set, the estimate's inside that no ball holds, its nearest sample a rim
+          // sample kCarrySpacings of its spacing away or more: the estimate carried the scanned
+          // patches on past the scan's edge (a wrist cut flat, a part's unscanned underside);
+          // w's outside decides, as where w is clear.
           bool carried = false;
           if (!closed_set && x <= 0.0f && !held_in) {
             nearest.Find(p, 1, &idx, &d2);
+            found = true;
             carried = rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx];
           }
           if (!carried) {  // decided below, with grad w from one batch
@@ -1744,7 +1746,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         } else if (held_in) {
           continue;
         }
-        nearest.Find(p, 1, &idx, &d2);
+        if (!found) nearest.Find(p, 1, &idx, &d2);
         const double ds = std::sqrt(d2);
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
