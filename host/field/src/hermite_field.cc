@@ -180,10 +180,10 @@ constexpr double kRimClosingWinding = 0.1;
 // (CGAL's hand under its flat-cut wrist, range scan: 20,191 -> 14,568 far-wrong nodes; 111 open
 // and range rows of 37 meshes: 3,708,523 -> 3,035,566, 102 -> 107 meeting Poisson). Nearer, or
 // beside a sample that is no rim, the estimate stands: with every such node cut the pinion's
-// gear body was cut behind its scanned top (open scan, wrong sign 20.35 -> 25.01 %) and the oni's
-// sparse scan bitten 1.5 mm deep (21,048 nodes); without the rim test, 1 spacing changed 3,606
-// oni nodes and 1.5 changed 8; with both, none. docs/field-methods.md § Open sides: where w is
-// unclear.
+// gear body was cut behind its scanned top (open scan, wrong sign 20.35 -> 25.01 %); with the rim
+// test alone the oni's sparse scan was bitten 1.5 mm deep (21,048 nodes); with the distance alone,
+// 1 spacing changed 3,606 oni nodes and 1.5 changed 8; with both, none. docs/field-methods.md §
+// Open sides: where w is unclear.
 constexpr double kCarrySpacings = 1.5;
 constexpr std::size_t kRimNeighbours = 16;
 // RimSamples: the widest angular gap between a sample's neighbours on its tangent plane (over
