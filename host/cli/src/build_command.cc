@@ -338,7 +338,7 @@ int RunBuild(const BuildArgs& args) {
     fmt::print(
         stderr,
         "palpa build: note: {}: the scan {}: the field closes it (by the "
-        "samples' winding number, and where that is unclear by the inner balls of the nearest samples, "
+        "samples' winding number, and where that is unclear by the inner balls that continue the scanned surface, "
         "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
         "sample (3 sample spacings){}\n",
         args.points,
