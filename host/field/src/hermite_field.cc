@@ -1724,16 +1724,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         std::size_t idx = 0;
         double d2 = 0.0;
         bool found = false;  // idx and d2 hold the nearest sample
-        const bool unclear_w = std::abs(w - 0.5) <= kWindingClear;
-        // Closed by a rim's balls (asked of an unclear w on open sets only, below).
-        const bool held_in = x <= 0.0f && (!unclear_w || !closed_set) && rule.Inside(w, p);
-        if (unclear_w) {
+        if (std::abs(w - 0.5) <= kWindingClear) {
           // On an open set, the estimate's inside that no ball holds, its nearest sample a rim
           // sample kCarrySpacings of its spacing away or more: the estimate carried the scanned
           // patches on past the scan's edge (a wrist cut flat, a part's unscanned underside);
           // w's outside decides, as where w is clear.
           bool carried = false;
-          if (!closed_set && x <= 0.0f && !held_in) {
+          if (!closed_set && x <= 0.0f && !rule.Inside(w, p)) {
             nearest.Find(p, 1, &idx, &d2);
             found = true;
             carried = rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx];
@@ -1743,8 +1740,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             if (unclear.back().second.wants_gradient) gradient_steps(p, steps);
             continue;
           }
-        } else if (held_in) {
-          continue;
+        } else if (x <= 0.0f && rule.Inside(w, p)) {
+          continue;  // closed by a rim's balls
         }
         if (!found) nearest.Find(p, 1, &idx, &d2);
         const double ds = std::sqrt(d2);
