@@ -184,6 +184,14 @@ constexpr double kRimClosingWinding = 0.1;
 // test alone the oni's sparse scan was bitten 1.5 mm deep (21,048 nodes); with the distance alone,
 // 1 spacing changed 3,606 oni nodes and 1.5 changed 8; with both, none. docs/field-methods.md §
 // Open sides: where w is unclear.
+// ... and so does a node more than max(kHullVoxels, kHullSpacings) beyond the samples' convex hull,
+// whatever its nearest sample: the estimate had carried a ball that does not continue the surface
+// there (the bundled oni: the chin's inner ball held a shell under the open neck 7-9 mm from
+// every sample, to the grid's face, its nearest samples no rims; 111 open and range rows:
+// 3,035,566 -> 2,207,169 far-wrong nodes, 107 -> 110 meeting Poisson). Either test alone does
+// less: the hull alone loses the rim test's gains within the hull (fandisk's open scan 11,915 ->
+// 24,223, the anchor's 17,717 -> 32,705). docs/field-methods.md § Open sides: beyond the samples'
+// hull.
 constexpr double kCarrySpacings = 1.5;
 constexpr std::size_t kRimNeighbours = 16;
 // RimSamples: the widest angular gap between a sample's neighbours on its tangent plane (over
@@ -1170,9 +1178,19 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
   return Eigen::AlignedBox3d(box.min() - V3::Constant(step), box.max() + V3::Constant(step));
 }
 
+// How far p lies outside a convex hull given as its faces' planes (n, d) with n outward and unit:
+// the largest n.p + d, a lower bound on the distance (exact where the nearest point of the hull is
+// on a face), 1-Lipschitz; -infinity without planes (a flat or degenerate set has no inside).
+double HullDistance(const std::vector<Eigen::Vector4d>& planes, const V3& p) {
+  double out = -std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector4d& f : planes) out = std::max(out, f.head<3>().dot(p) + f[3]);
+  return out;
+}
+
 // Sets outside every node of `field` held inside that lies more than `beyond` (metres) outside the
-// convex hull of `hull_points` (the samples and the guards), and returns how many. The node takes
-// its distance to the nearest sample (`wide`: the samples, not the guards), clamped to the band.
+// convex hull of the samples and the guards (its faces' planes: `hull`), and returns how many. The
+// node takes its distance to the nearest sample (`wide`: the samples, not the guards), clamped to
+// the band.
 // A closed surface lies within a sagitta of its samples' hull, so such a node is the estimate
 // carried past a sparse part's last samples: the cow with 500 samples (seed 4) had 247 phantom
 // nodes, 5.8 voxels deep, under two hooves whose soles no sample lies on, w unclear (0.30-0.93).
@@ -1183,20 +1201,15 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
 // one brick is dropped before g is evaluated when it holds no inside node (a dense lattice of g
 // at the brick corners, filled over every block reaching past `beyond`, cost 2.5-4 x as much at
 // 1,200 cells).
-std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const std::vector<V3>& hull_points,
+std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const std::vector<Eigen::Vector4d>& hull,
                                 double beyond) {
-  const std::vector<Eigen::Vector4d> planes = detail::ConvexHullPlanes(hull_points);
-  if (planes.empty()) return 0;
+  if (hull.empty()) return 0;
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
   constexpr int kB = SparseField::kBrick;
   constexpr int kBlock = 8;  // bricks per edge of the boxes first tested, spread over the threads
-  const auto g = [&](const V3& p) {
-    double out = -std::numeric_limits<double>::infinity();
-    for (const Eigen::Vector4d& f : planes) out = std::max(out, f.head<3>().dot(p) + f[3]);
-    return out;
-  };
+  const auto g = [&](const V3& p) { return HullDistance(hull, p); };
   // A cube of nodes from `lo`, `size` (a power of 2) on each axis, clipped to the grid; the first
   // ones are aligned blocks of bricks, so a cube of at most kB nodes lies in one brick.
   struct Box {
@@ -1495,6 +1508,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const bool closed_set = closure.closed;
   st.samples_open = closure.open_side;
   st.sample_area_m2 = closure.area;
+  // The samples' convex hull, the guards included (they may be a sparse part's only samples).
+  // Farther beyond it than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the
+  // far pass) and an open set's inside, where w is unclear and no ball holds it, is w's to decide
+  // (the far pass's carry rule).
+  std::vector<V3> hull_points = positions;
+  hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
+  const std::vector<Eigen::Vector4d> hull =
+      hull_cut ? detail::ConvexHullPlanes(hull_points) : std::vector<Eigen::Vector4d>{};
+  const double hull_beyond = std::max(kHullVoxels * h, kHullSpacings * median_spacing);
   // The far pass's filter passes a node held inside whose interpolated w is under this: 1/2, and
   // on a closed set kDiscPointMax (the disc rule examines it).
   const float inside_min = closed_set ? kDiscPointMax : 0.5f;
@@ -1723,17 +1745,19 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         if ((w >= 0.5) == (x <= 0.0f)) continue;
         std::size_t idx = 0;
         double d2 = 0.0;
-        bool found = false;  // idx and d2 hold the nearest sample
+        bool found = false;    // idx and d2 hold the nearest sample
+        bool carried = false;  // the estimate carried past the scanned surface (below)
         if (std::abs(w - 0.5) <= kWindingClear) {
           // On an open set, the estimate's inside that no ball holds, its nearest sample a rim
-          // sample kCarrySpacings of its spacing away or more: the estimate carried the scanned
-          // patches on past the scan's edge (a wrist cut flat, a part's unscanned underside);
-          // w's outside decides, as where w is clear.
-          bool carried = false;
+          // sample kCarrySpacings of its spacing away or more, or the node beyond the samples'
+          // hull: the estimate carried the scanned patches or a ball that does not continue the
+          // surface on past the scan's edge (a wrist cut flat, a part's unscanned underside, a
+          // head's open neck); w's outside decides, as where w is clear.
           if (!closed_set && x <= 0.0f && !rule.Inside(w, p)) {
             nearest.Find(p, 1, &idx, &d2);
             found = true;
-            carried = rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx];
+            carried = (rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx]) ||
+                      HullDistance(hull, p) > hull_beyond;
           }
           if (!carried) {  // decided below, with grad w from one batch
             unclear.push_back({f, unclear_near(p, x, w, nearest)});
@@ -1748,7 +1772,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         const float mag = std::min(band, static_cast<float>(ds / h));
         x = w >= 0.5 ? -mag : mag;
         ++local;
-        if (open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
+        // A carried node on a face is the estimate's, not a closure the grid cut.
+        if (!carried && open_face_cut(bi * kB + a, bj * kB + c, bk * kB + e, p, w)) ++face_local;
       }
       // A node's decision reads its own value only, so the unclear ones can wait for the batch.
       w_steps.resize(steps.size());
@@ -1768,10 +1793,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   });
   st.winding_far_nodes = far_flipped.load();
   if (closed_set && hull_cut) {
-    std::vector<V3> hull_points = positions;
-    hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-    st.hull_cut_beyond_m = std::max(kHullVoxels * h, kHullSpacings * median_spacing);
-    st.hull_cut_nodes = CutBeyondSampleHull(field, wide, hull_points, st.hull_cut_beyond_m);
+    st.hull_cut_beyond_m = hull_beyond;
+    st.hull_cut_nodes = CutBeyondSampleHull(field, wide, hull, hull_beyond);
   }
   // No inside node on a grid face: the object must be closed inside the grid (an open scan's
   // side, a stray sample near the edge). A face node at or below 0 is set outside; the Lipschitz

@@ -42,8 +42,9 @@
 // continues its surface and touches it again at its antipode; on an open set this overrules the
 // estimate's outside too, there up to w < 0.7), so the closure continues the scanned curvature
 // (closure_beyond_grid); and on an open set, where no ball holds a node the estimate holds inside
-// and its nearest sample is a rim sample 1.5 of its spacings away or more, w's outside decides
-// (the estimate carried the scanned patches on past the scan's edge).
+// and its nearest sample is a rim sample 1.5 of its spacings away or more, or the node lies beyond
+// the samples' convex hull as below, w's outside decides (the estimate carried the scanned patches,
+// or a ball that does not continue the surface, on past the scan's edge).
 // Last SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the
 // proxy's sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
 // patches meet or the bracket clamps.
@@ -75,8 +76,9 @@ struct HermiteOptions {
   bool winding_labels = true;
   // On a closed set, inside nodes more than max(3 voxels, 0.3 sample spacings) outside the samples'
   // convex hull (the guards' positions included) are set outside (issue 20; HermiteStats::
-  // hull_cut_nodes): the estimate had carried a sparse part on past its last samples. Off only to
-  // measure what it prevents.
+  // hull_cut_nodes): the estimate had carried a sparse part on past its last samples. On an open
+  // set, such a node where w is unclear and no ball of the closing rule holds it takes w's side.
+  // Off only to measure what it prevents.
   bool hull_cut = true;
   // > 0 (metres): where the inside reached a grid face, LabelByWinding also finds how far past the
   // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
