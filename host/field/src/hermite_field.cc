@@ -184,14 +184,14 @@ constexpr double kRimClosingWinding = 0.1;
 // test alone the oni's sparse scan was bitten 1.5 mm deep (21,048 nodes); with the distance alone,
 // 1 spacing changed 3,606 oni nodes and 1.5 changed 8; with both, none. docs/field-methods.md §
 // Open sides: where w is unclear.
-// ... and so does a node more than max(kHullVoxels, kHullSpacings) beyond the samples' convex hull,
-// whatever its nearest sample: the estimate had carried a ball that does not continue the surface
-// there (the bundled oni: the chin's inner ball held a shell under the open neck 7-9 mm from
-// every sample, to the grid's face, its nearest samples no rims; 111 open and range rows:
-// 3,035,566 -> 2,207,169 far-wrong nodes, 107 -> 110 meeting Poisson). Either test alone does
-// less: the hull alone loses the rim test's gains within the hull (fandisk's open scan 11,915 ->
-// 24,223, the anchor's 17,717 -> 32,705). docs/field-methods.md § Open sides: beyond the samples'
-// hull.
+// ... and so does a node more than max(kHullVoxels voxels, kHullSpacings median spacings) beyond
+// the samples' convex hull, whatever its nearest sample: the estimate had carried a ball that does
+// not continue the surface there (the bundled oni: the chin's inner ball held a shell under the
+// open neck 7-9 mm from every sample, to the grid's face, its nearest samples no rims; 111 open
+// and range rows: 3,035,566 -> 2,207,169 far-wrong nodes, 107 -> 110 meeting Poisson). Either test
+// alone does less: the hull alone loses the rim test's gains within the hull (fandisk's open scan
+// 11,915 -> 24,223, the anchor's 17,717 -> 32,705). docs/field-methods.md § Open sides: beyond the
+// samples' hull.
 constexpr double kCarrySpacings = 1.5;
 constexpr std::size_t kRimNeighbours = 16;
 // RimSamples: the widest angular gap between a sample's neighbours on its tangent plane (over
