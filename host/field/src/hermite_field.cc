@@ -1505,10 +1505,12 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // Farther beyond it than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the
   // far pass) and an open set's inside, where w is unclear and no ball holds it, is w's to decide
   // (the far pass's carry rule).
-  std::vector<V3> hull_points = positions;
-  hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-  const std::vector<Eigen::Vector4d> hull =
-      hull_cut ? detail::ConvexHullPlanes(hull_points) : std::vector<Eigen::Vector4d>{};
+  const std::vector<Eigen::Vector4d> hull = [&] {
+    if (!hull_cut) return std::vector<Eigen::Vector4d>{};
+    std::vector<V3> hull_points = positions;  // freed before the far pass
+    hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
+    return detail::ConvexHullPlanes(hull_points);
+  }();
   const double hull_beyond = std::max(kHullVoxels * h, kHullSpacings * median_spacing);
   // A node the far pass set outside is an open side's cut at a grid face when w is still a tenth
   // or more there, as near an open side's closing surface (a thin open plate cut by its grid:
