@@ -37,6 +37,8 @@ struct BuildOptions {
   bool leak_guard = true;
   // kHermite: HermiteOptions::hull_cut. Off only to measure what it prevents (tests).
   bool hull_cut = true;
+  // kHermite: HermiteOptions::smooth_closure. Off only to measure what it prevents (tests).
+  bool smooth_closure = true;
   // kHermite: when the field of an open scan is closed at the grid's faces, grow the grid (same
   // voxel, up to half the samples' longest side per side) to hold the closure, and build again
   // (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.

@@ -44,7 +44,9 @@
 // (closure_beyond_grid); and on an open set, where no ball holds a node the estimate holds inside
 // and its nearest sample is a rim sample 1.5 of its spacings away or more, or the node lies beyond
 // the samples' convex hull as below, w's outside decides (the estimate carried the scanned patches,
-// or a ball that does not continue the surface, on past the scan's edge).
+// or a ball that does not continue the surface, on past the scan's edge). On an open set the
+// nodes beyond the trust distance then take the side of most of their 3 x 3 x 3 block, for 5
+// rounds (smooth_closure): those rules, node by node, left the closure ragged.
 // Last SparseField::ProjectLipschitz makes every axis neighbour difference <= 1 voxel, as the
 // proxy's sphere tracing needs: the per-node formula alone breaks that by up to ~2.5 voxels where
 // patches meet or the bracket clamps.
@@ -80,6 +82,11 @@ struct HermiteOptions {
   // set, such a node where w is unclear and no ball of the closing rule holds it takes w's side.
   // Off only to measure what it prevents.
   bool hull_cut = true;
+  // On an open set, the nodes with no sample within the trust distance take the side of most of
+  // the 27 nodes about them, for 5 rounds (HermiteStats::closure_smoothed_nodes): the far pass
+  // decides those nodes one by one and left an unscanned side's closure ragged (spikes, notches,
+  // floating specks of solid, pockets). Off only to measure what it prevents.
+  bool smooth_closure = true;
   // > 0 (metres): where the inside reached a grid face, LabelByWinding also finds how far past the
   // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
   // with the winding number and closing rule it already holds. 0: not searched.
@@ -112,6 +119,10 @@ struct HermiteStats {
   std::size_t winding_bricks = 0;         // unevaluated bricks holding w = 1/2, given values from w
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t winding_far_nodes = 0;      // evaluated nodes far from every sample given w's side
+  // Open sets: side changes of the majority vote that smooths the closure beyond the trust
+  // distance of every sample (3 x 3 x 3 blocks, 5 rounds; docs/field-methods.md § Open sides:
+  // the closure smoothed).
+  std::size_t closure_smoothed_nodes = 0;
   // Closed sets: inside nodes more than hull_cut_beyond_m (metres) outside the samples' convex hull,
   // set outside (a part the estimate carried past its last samples).
   std::size_t hull_cut_nodes = 0;
