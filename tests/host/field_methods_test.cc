@@ -1198,11 +1198,7 @@ struct Components {
 };
 Components CountComponents(const SparseField& f) {
   const GridSpec& g = f.grid();
-  const auto index = [&](int i, int j, int k) {
-    return (static_cast<std::size_t>(i) * static_cast<std::size_t>(g.dims[1]) + static_cast<std::size_t>(j)) *
-               static_cast<std::size_t>(g.dims[2]) +
-           static_cast<std::size_t>(k);
-  };
+  const auto index = [&](int i, int j, int k) { return g.Index(i, j, k); };
   std::vector<std::uint8_t> inside(g.NodeCount()), seen(g.NodeCount(), 0);
   for (int i = 0; i < g.dims[0]; ++i)
     for (int j = 0; j < g.dims[1]; ++j)

@@ -1213,7 +1213,6 @@ double HullDistance(const std::vector<Eigen::Vector4d>& planes, const V3& p) {
 std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> bricks, const KdTree& wide, double trust,
                           int rounds, float cap) {
   const GridSpec& grid = field.grid();
-  const double h = grid.voxel_m;
   constexpr int kB = SparseField::kBrick;
   constexpr int kN = kB * kB * kB;
   constexpr int kH = kB + 2;  // the sides' halo: a brick's nodes and one layer round them
@@ -1280,7 +1279,7 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
           if (side[centre] == 1 ? 2 * inside >= all : 2 * inside <= all) continue;
           std::uint8_t& far = beyond[m * kN + static_cast<std::size_t>(q)];
           if (far == 0) {
-            const V3 p = grid.origin_m + h * V3(bc[0] * kB + a, bc[1] * kB + c, bc[2] * kB + e);
+            const V3 p = grid.Node(bc[0] * kB + a, bc[1] * kB + c, bc[2] * kB + e);
             AnyWithin near(trust);
             wide.findNeighbors(near, p.data(), nanoflann::SearchParams());
             far = near.found() ? 1 : 2;
