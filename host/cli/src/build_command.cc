@@ -339,11 +339,16 @@ int RunBuild(const BuildArgs& args) {
         stderr,
         "palpa build: note: {}: the scan {}: the field closes it (by the "
         "samples' winding number, and where that is unclear by the inner balls that continue the scanned surface, "
-        "continuing their curvature) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
+        "continuing their curvature{}) over {:.4g} mm^2 ({:.4g} model units^2) more than {:.3g} mm from every "
         "sample (3 sample spacings){}\n",
         args.points,
         // A flipped patch's normals have a flux of their own, which alone makes a closed set look open.
         normals_blamed ? "looks open (the flipped normals above may be why)" : "is open (the normals are not to blame)",
+        built.hermite.closure_smoothed_nodes > 0
+            ? fmt::format("; then smoothed: {} nodes beyond every sample's reach took the side of most nodes about "
+                          "them",
+                          built.hermite.closure_smoothed_nodes)
+            : std::string(),
         closed_m2 * 1e6, closed, coverage.min_distance_m * 1e3,
         (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "
                              "closed side",
