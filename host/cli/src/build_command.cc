@@ -344,11 +344,10 @@ int RunBuild(const BuildArgs& args) {
         args.points,
         // A flipped patch's normals have a flux of their own, which alone makes a closed set look open.
         normals_blamed ? "looks open (the flipped normals above may be why)" : "is open (the normals are not to blame)",
-        built.hermite.closure_smoothed_nodes > 0
-            // Side changes over the vote's rounds: a node may change more than once.
+        built.hermite.closure_side_changes > 0
             ? fmt::format("; then smoothed by {} side changes of nodes beyond every sample's reach, each to the "
                           "side of most nodes about it",
-                          built.hermite.closure_smoothed_nodes)
+                          built.hermite.closure_side_changes)
             : std::string(),
         closed_m2 * 1e6, closed, coverage.min_distance_m * 1e3,
         (grown ? fmt::format("; the grid was grown from {}x{}x{} to {}x{}x{} nodes (same voxel) to hold the "

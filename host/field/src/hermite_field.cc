@@ -1929,7 +1929,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   });
   st.winding_far_nodes = far_flipped.load();
   if (!closed_set && smooth_closure)
-    st.closure_smoothed_nodes = SmoothClosure(field, evaluated, wide, trust, kSmoothRounds, kSmoothCap);
+    st.closure_side_changes = SmoothClosure(field, evaluated, wide, trust, kSmoothRounds, kSmoothCap);
   if (closed_set && hull_cut) {
     st.hull_cut_beyond_m = hull_beyond;
     st.hull_cut_nodes = CutBeyondSampleHull(field, wide, hull, hull_beyond);

@@ -83,7 +83,7 @@ struct HermiteOptions {
   // Off only to measure what it prevents.
   bool hull_cut = true;
   // On an open set, the nodes with no sample within the trust distance take the side of most of
-  // the 27 nodes about them, for 5 rounds (HermiteStats::closure_smoothed_nodes): the far pass
+  // the 27 nodes about them, for 5 rounds (HermiteStats::closure_side_changes): the far pass
   // decides those nodes one by one and left an unscanned side's closure ragged (spikes, notches,
   // floating specks of solid, pockets). Off only to measure what it prevents.
   bool smooth_closure = true;
@@ -120,9 +120,9 @@ struct HermiteStats {
   std::size_t winding_flipped_nodes = 0;  // clamped evaluated nodes given w's side
   std::size_t winding_far_nodes = 0;      // evaluated nodes far from every sample given w's side
   // Open sets: side changes of the majority vote that smooths the closure beyond the trust
-  // distance of every sample (3 x 3 x 3 blocks, 5 rounds; docs/field-methods.md § Open sides:
-  // the closure smoothed).
-  std::size_t closure_smoothed_nodes = 0;
+  // distance of every sample, over its rounds (a node may change more than once; 3 x 3 x 3
+  // blocks, 5 rounds; docs/field-methods.md § Open sides: the closure smoothed).
+  std::size_t closure_side_changes = 0;
   // Closed sets: inside nodes more than hull_cut_beyond_m (metres) outside the samples' convex hull,
   // set outside (a part the estimate carried past its last samples).
   std::size_t hull_cut_nodes = 0;
