@@ -1285,18 +1285,14 @@ TEST(Winding, OpenScanClosureIsSmoothedBeyondTheSamples) {
 // from the surface, and the band as right as before (0.19 % wrong sign; 0.20 % with the pocket).
 TEST(Winding, OpenTubesCoreIsHeldByMedialBalls) {
   constexpr double kRing = 0.03, kTube = 0.01;
-  std::mt19937_64 rng(3);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const PointSet torus = testing::TorusSamples(kRing, kTube, 5000, 3);
   std::vector<Eigen::Vector3d> p, n;
-  for (int drawn = 0; drawn < 5000;) {
-    const double u = 2 * std::numbers::pi * unit(rng), v = 2 * std::numbers::pi * unit(rng);
-    if (unit(rng) * (kRing + kTube) > kRing + kTube * std::cos(v)) continue;  // area-uniform
-    ++drawn;
-    // The ring in the x-z plane, its axis along y.
-    const Eigen::Vector3d centre(kRing * std::cos(u), 0.0, kRing * std::sin(u));
-    const Eigen::Vector3d normal = std::cos(v) * centre / kRing + std::sin(v) * Eigen::Vector3d::UnitY();
+  for (std::size_t i = 0; i < torus.positions.size(); ++i) {
+    // Stood upright (y and z swapped): the ring in the x-z plane, its axis along y.
+    const auto upright = [](const Eigen::Vector3d& x) { return Eigen::Vector3d(x.x(), x.z(), x.y()); };
+    const Eigen::Vector3d normal = upright(torus.normals[i]);
     if (normal.z() <= -std::cos(80.0 * std::numbers::pi / 180.0)) continue;  // OpenScan's rule
-    p.push_back(centre + kTube * normal);
+    p.push_back(upright(torus.positions[i]));
     n.push_back(normal);
   }
   BuildOptions options;

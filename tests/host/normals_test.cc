@@ -1634,18 +1634,8 @@ TEST(SmoothNoisyPositions, LeavesCleanSamplesAlone) {
 // same torus with noise of that size, densely sampled, is measured and averaged.
 TEST(SmoothNoisyPositions, TellsASparseDetailedSurfaceFromNoise) {
   const auto torus = [](std::size_t n, std::uint64_t seed) {
-    constexpr double kRing = 1.0, kTube = 0.25;
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<double> unit(0.0, 1.0);
-    Oriented out;
-    while (out.positions.size() < n) {
-      const double u = 2 * std::numbers::pi * unit(rng), v = 2 * std::numbers::pi * unit(rng);
-      if (unit(rng) * (kRing + kTube) > kRing + kTube * std::cos(v)) continue;  // area-uniform
-      const V3 normal(std::cos(v) * std::cos(u), std::cos(v) * std::sin(u), std::sin(v));
-      out.positions.push_back(V3(kRing * std::cos(u), kRing * std::sin(u), 0) + kTube * normal);
-      out.normals.push_back(normal);
-    }
-    return out;
+    PointSet drawn = testing::TorusSamples(1.0, 0.25, n, seed);
+    return Oriented{std::move(drawn.positions), std::move(drawn.normals)};
   };
   Oriented sparse = torus(400, 8);  // spacing ~0.16 against the tube's radius 0.25; residual 0.0015, noise 0
   const std::vector<V3> before = sparse.positions;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <random>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -39,6 +40,23 @@ inline Eigen::Vector3d FibonacciPoint(std::size_t i, std::size_t n) {
   const double rho = std::sqrt(1.0 - z * z);
   const double t = golden * static_cast<double>(i);
   return {rho * std::cos(t), rho * std::sin(t), z};
+}
+
+// `n` area-uniform samples of a torus round the z axis (ring radius `ring`, tube radius `tube`) with
+// their exact outward normals, drawn with std::mt19937_64(seed): u round the ring, v round the
+// tube, a draw kept with probability (ring + tube cos v) / (ring + tube).
+inline PointSet TorusSamples(double ring, double tube, std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  PointSet out;
+  while (out.positions.size() < n) {
+    const double u = 2 * std::numbers::pi * unit(rng), v = 2 * std::numbers::pi * unit(rng);
+    if (unit(rng) * (ring + tube) > ring + tube * std::cos(v)) continue;  // area-uniform
+    const Eigen::Vector3d normal(std::cos(v) * std::cos(u), std::cos(v) * std::sin(u), std::sin(v));
+    out.positions.push_back(Eigen::Vector3d(ring * std::cos(u), ring * std::sin(u), 0) + tube * normal);
+    out.normals.push_back(normal);
+  }
+  return out;
 }
 
 // A file under the test temp dir that is removed when the object goes out of scope.

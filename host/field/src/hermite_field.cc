@@ -1030,7 +1030,6 @@ class ClosingRule {
         sectors_(inner.radii.size()),
         medial_(inner.radii.size(), 0),
         far_centres_{&far_centre_points_} {
-    std::vector<std::uint8_t> medial(sectors_.size(), 0);  // the ball also touches the surface at its antipode
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const V3& n = normals[i];
@@ -1064,14 +1063,13 @@ class ClosingRule {
         if (mask == 0) continue;
         // The antipode, -n from the centre: its normal within acos(kContinueCos) of -n.
         const std::optional<V3> far_side = normal_at(V3(-n));
-        medial[i] = far_side && -far_side->dot(n) >= kContinueCos ? 1 : 0;
-        medial_[i] = medial[i];
+        medial_[i] = far_side && -far_side->dot(n) >= kContinueCos ? 1 : 0;
       }
     });
     // Only those can close a point beyond the nearest; a flat face's balls (a cube's: radius up to
     // r_max) never are, and would make every search long.
-    for (std::size_t i = 0; i < medial.size(); ++i) {
-      if (medial[i] == 0 || !std::isfinite(inner.radii[i])) continue;
+    for (std::size_t i = 0; i < medial_.size(); ++i) {
+      if (medial_[i] == 0 || !std::isfinite(inner.radii[i])) continue;
       far_balls_.push_back(i);
       far_centre_points_.push_back(inner.centres[i]);
       largest_radius_ = std::max(largest_radius_, inner.radii[i]);
