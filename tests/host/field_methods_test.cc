@@ -1059,6 +1059,36 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
   const auto [cut_wrong, cut_faces] = wrong_and_faces(*cut);
   EXPECT_EQ(cut_faces, 0u);
   EXPECT_GT(cut_wrong, 1000u);
+
+  // The closure is found before any node is evaluated: on the fitted grid HermiteField returns at
+  // once, unbuilt, and the grown build is one evaluation on the final grid, node for node.
+  auto fitted = MakeGrid(p, options.grid);
+  ASSERT_TRUE(fitted) << fitted.error().message;
+  EXPECT_EQ(fitted->dims, built->grid_grown_from);
+  Eigen::Vector3d lo = p.front(), hi = lo;
+  for (const Eigen::Vector3d& q : p) {
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
+  const double r_max = (hi - lo).maxCoeff();
+  std::vector<Eigen::Vector3d> unit(n.size());
+  for (std::size_t i = 0; i < n.size(); ++i) unit[i] = n[i].normalized();
+  HermiteOptions searched;
+  searched.closure_reach_m = 0.5 * r_max;
+  HermiteStats first;
+  const SparseField unbuilt = HermiteField(*fitted, p, unit, r_max, searched, &first);
+  ASSERT_TRUE(first.closure_beyond_grid.has_value());
+  EXPECT_LT(first.closure_beyond_grid->min().z(), fitted->origin_m.z());
+  EXPECT_EQ(first.bricks_evaluated, 0u);
+  EXPECT_EQ(unbuilt.AllocatedBricks(), 0u);
+  HermiteStats once;
+  const SparseField direct = HermiteField(g, p, unit, r_max, {}, &once);
+  EXPECT_EQ(once.bricks_evaluated, built->hermite.bricks_evaluated);
+  std::size_t differ = 0;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) differ += direct.Value(i, j, k) != built->field.Value(i, j, k) ? 1u : 0u;
+  EXPECT_EQ(differ, 0u);
 }
 
 // Issue 20: a post cut flat and scanned without its bottom (a wrist, a hub, a part's foot: a

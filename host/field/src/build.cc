@@ -84,30 +84,36 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);
     const bool grow = options.grow_for_closure && !result.orientation.OpenScanInconsistent();
     hermite_options.closure_reach_m = grow ? reach.x() : 0.0;
-    result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
-    // An open scan closed at the grid faces: grow the grid, voxel kept, to hold the closure
+    // An open scan closed past the grid's faces: grow the grid, voxel kept, to hold the closure
     // (issue 20: no inside node on a grid face, and no flat cut where the closure goes on). Not
     // when the normals disagree: the closure then follows flipped samples (data/cube.pwn: a
-    // grid 4.2 times larger, 26 s instead of 9, and still cut at its faces). A second closure may
-    // reach farther than the first lattice saw: up to kClosureGrowths rounds.
+    // grid 4.2 times larger, 26 s instead of 9, and still cut at its faces). HermiteField finds
+    // the closure before it evaluates a node and then returns unbuilt; a second closure may reach
+    // farther than the first lattice saw: up to kClosureGrowths rounds, the last one built.
     Eigen::AlignedBox3d hold(lo, hi);  // what the grid must hold: the samples and their closure
-    for (int round = 0; round < kClosureGrowths && stats.closure_beyond_grid; ++round) {
+    HermiteStats previous;             // the last round's packing, reused: same voxel, same balls
+    double seconds = 0.0;              // of the unbuilt rounds, counted as distance time
+    for (int round = 0;; ++round) {
+      result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
+      hermite_options.packed = nullptr;
+      if (!stats.closure_beyond_grid) break;  // built
       hold.extend(*stats.closure_beyond_grid);
       hold = hold.intersection(Eigen::AlignedBox3d(lo - reach, hi + reach));
       GridOptions grown = options.grid;
       grown.voxel_m = grid->voxel_m;
       auto bigger = MakeGrid({hold.min(), hold.max()}, grown);
-      if (!bigger || bigger->NodeCount() <= grid->NodeCount()) break;
-      const double seconds = stats.seconds_packing + stats.seconds_distance;
-      if (round == 0) result.grid_grown_from = grid->dims;
-      grid = std::move(bigger);
-      const HermiteStats previous = std::exchange(stats, {});
-      hermite_options.packed = &previous;  // same voxel: the packing does not change
-      if (round + 1 == kClosureGrowths) hermite_options.closure_reach_m = 0.0;  // no round left to use it
-      result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
-      hermite_options.packed = nullptr;
-      stats.seconds_distance += seconds;  // the earlier passes count as distance time
+      const bool grew = bigger && bigger->NodeCount() > grid->NodeCount();
+      if (grew) {
+        if (result.grid_grown_from[0] == 0) result.grid_grown_from = grid->dims;
+        grid = std::move(bigger);
+      }
+      // The last round, or a grid that cannot hold more, is built without the search.
+      if (!grew || round + 1 >= kClosureGrowths) hermite_options.closure_reach_m = 0.0;
+      seconds += stats.seconds_packing + stats.seconds_distance;
+      previous = std::exchange(stats, {});
+      hermite_options.packed = &previous;
     }
+    stats.seconds_distance += seconds;
     result.packing = std::move(stats.inner);
     stats.inner = {};
     stats.outer = {};

@@ -1478,34 +1478,63 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
 // `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions. On a closed set
 // with `hull_cut`, CutBeyondSampleHull follows the far pass; on an open set with `smooth_closure`,
 // SmoothClosure.
+// What decides the side of the nodes no sample reaches: the samples' winding number, their rims,
+// their convex hull and the closing rule. None of it depends on the grid's extent, so HermiteField
+// builds it once, before the band, and asks it first whether an open scan's closure leaves the
+// grid (ClosureBeyondGrid): then the caller grows the grid before any node is evaluated.
+struct SideRules {
+  // `tree`, `spacing` (SampleSpacing) and `inner` (the guarded inner packing) are HermiteField's,
+  // over the same positions; they must outlive this. `guard_positions` join the hull only.
+  SideRules(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
+            const std::vector<V3>& guard_positions, const std::vector<double>& spacing, const Packing& inner,
+            double voxel_m, bool hull_cut)
+      : areas(SampleAreas(positions, kAreaNeighbours)),
+        winding(positions, normals, areas),
+        rim(RimSamples(tree, positions, normals, winding)),
+        median_spacing(detail::Median(spacing)),
+        // The guards join the hull: they may be a sparse part's only samples. Farther beyond it
+        // than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the far pass)
+        // and an open set's inside, where w is unclear and no ball holds it, is w's to decide (the
+        // far pass's carry rule).
+        hull([&] {
+          if (!hull_cut) return std::vector<Eigen::Vector4d>{};
+          std::vector<V3> hull_points = positions;
+          hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
+          return detail::ConvexHullPlanes(hull_points);
+        }()),
+        hull_beyond(std::max(kHullVoxels * voxel_m, kHullSpacings * median_spacing)),
+        rule(tree, inner, rim, positions, normals, spacing, hull, hull_beyond) {}
+  SideRules(const SideRules&) = delete;
+  SideRules& operator=(const SideRules&) = delete;
+
+  const std::vector<double> areas;  // SampleAreas, m^2
+  const WindingNumber winding;
+  const std::vector<std::uint8_t> rim;  // RimSamples
+  const double median_spacing;          // metres
+  const std::vector<Eigen::Vector4d> hull;
+  const double hull_beyond;  // metres
+  const ClosingRule rule;
+};
+
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                     const std::vector<V3>& guard_positions, const std::vector<V3>& guard_normals, const KdTree& tree,
-                    const std::vector<double>& spacing, double closure_reach_m, bool hull_cut, bool smooth_closure,
+                    const std::vector<double>& spacing, const SideRules& sides, bool hull_cut, bool smooth_closure,
                     HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
   constexpr int kB = SparseField::kBrick;
-  const std::vector<double> areas = SampleAreas(positions, kAreaNeighbours);
-  const WindingNumber winding(positions, normals, areas);
+  const std::vector<double>& areas = sides.areas;
+  const WindingNumber& winding = sides.winding;
   const auto& bd = field.brick_dims();
   const std::array<std::size_t, 3> cd = {static_cast<std::size_t>(bd[0]) + 1, static_cast<std::size_t>(bd[1]) + 1,
                                          static_cast<std::size_t>(bd[2]) + 1};
   const auto node_at = [&](double i, double j, double k) { return V3(grid.origin_m + h * V3(i, j, k)); };
-  const std::vector<std::uint8_t> rim = RimSamples(tree, positions, normals, winding);
-  const double median_spacing = detail::Median(spacing);
-  // The samples' convex hull, the guards included (they may be a sparse part's only samples).
-  // Farther beyond it than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the
-  // far pass) and an open set's inside, where w is unclear and no ball holds it, is w's to decide
-  // (the far pass's carry rule).
-  const std::vector<Eigen::Vector4d> hull = [&] {
-    if (!hull_cut) return std::vector<Eigen::Vector4d>{};
-    std::vector<V3> hull_points = positions;  // freed before the far pass
-    hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-    return detail::ConvexHullPlanes(hull_points);
-  }();
-  const double hull_beyond = std::max(kHullVoxels * h, kHullSpacings * median_spacing);
-  const ClosingRule rule(tree, st.inner, rim, positions, normals, spacing, hull, hull_beyond);
+  const std::vector<std::uint8_t>& rim = sides.rim;
+  const double median_spacing = sides.median_spacing;
+  const std::vector<Eigen::Vector4d>& hull = sides.hull;
+  const double hull_beyond = sides.hull_beyond;
+  const ClosingRule& rule = sides.rule;
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
   std::vector<std::uint8_t> corner_in(corner_w.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
@@ -2019,8 +2048,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     open_cut += local;
   });
   st.face_nodes_open = far_faces.load() + open_cut.load();
-  if (closure_reach_m > 0.0 && st.face_nodes_closed > 0)
-    st.closure_beyond_grid = ClosureBeyondGrid(grid, st.inner, closure_reach_m, winding, rule);
 }
 
 }  // namespace
@@ -2091,6 +2118,22 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   start = std::chrono::steady_clock::now();
   const PointCloud cloud{&positions};
   const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  std::optional<SideRules> sides;
+  if (options.winding_labels) {
+    const auto phase = std::chrono::steady_clock::now();
+    sides.emplace(tree, positions, normals, guard_positions, spacing, st.inner, h, options.hull_cut);
+    // An open scan's closure past the grid: the caller grows the grid first (HermiteOptions::
+    // closure_reach_m), so no node is evaluated twice.
+    if (options.closure_reach_m > 0.0) {
+      st.closure_beyond_grid = ClosureBeyondGrid(grid, st.inner, options.closure_reach_m, sides->winding, sides->rule);
+      if (st.closure_beyond_grid) {
+        st.seconds_distance = SecondsSince(start);
+        return field;
+      }
+    }
+    st.seconds_project = SecondsSince(phase);
+  }
+  const auto patches_start = std::chrono::steady_clock::now();
   Model model;
   model.patches.resize(n);
   model.inner.resize(n);
@@ -2118,7 +2161,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     const double lo = grid.origin_m[a] / h, hi = lo + grid.dims[static_cast<std::size_t>(a)];
     model.tame = model.tame && std::abs(lo) <= kTameCoordinate && std::abs(hi) <= kTameCoordinate;
   }
-  st.seconds_patches = SecondsSince(start);
+  st.seconds_patches = SecondsSince(patches_start);
   auto phase = std::chrono::steady_clock::now();
   // Bricks within band + spacing of a sample may hold band nodes (the surface between samples
   // stays within about one spacing of them); no other brick is ever evaluated.
@@ -2312,13 +2355,13 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   st.seconds_evaluate = SecondsSince(phase);
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
-    LabelByWinding(field, positions, normals, guard_positions, guard_normals, tree, spacing, options.closure_reach_m,
-                   options.hull_cut, options.smooth_closure, st);
+    LabelByWinding(field, positions, normals, guard_positions, guard_normals, tree, spacing, *sides, options.hull_cut,
+                   options.smooth_closure, st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }
   st.lipschitz = field.ProjectLipschitz();
-  st.seconds_project = SecondsSince(phase);
+  st.seconds_project += SecondsSince(phase);
   st.seconds_distance = SecondsSince(start);
   return field;
 }

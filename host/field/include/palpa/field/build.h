@@ -39,9 +39,9 @@ struct BuildOptions {
   bool hull_cut = true;
   // kHermite: HermiteOptions::smooth_closure. Off only to measure what it prevents (tests).
   bool smooth_closure = true;
-  // kHermite: when the field of an open scan is closed at the grid's faces, grow the grid (same
-  // voxel, up to half the samples' longest side per side) to hold the closure, and build again
-  // (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.
+  // kHermite: when an open scan's closure goes on past the grid's faces, grow the grid (same
+  // voxel, up to half the samples' longest side per side) to hold it before the field is
+  // evaluated (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.
   bool grow_for_closure = true;
   // Filter the finished field once (SparseField::SmoothBand, then ProjectLipschitz): what palpa
   // build does after it denoised noisy samples (issue 20), to average the noise the samples'

@@ -87,9 +87,11 @@ struct HermiteOptions {
   // decides those nodes one by one and left an unscanned side's closure ragged (spikes, notches,
   // floating specks of solid, pockets). Off only to measure what it prevents.
   bool smooth_closure = true;
-  // > 0 (metres): where the inside reached a grid face, LabelByWinding also finds how far past the
-  // grid the closure goes, within this reach of the grid's box (HermiteStats::closure_beyond_grid),
-  // with the winding number and closing rule it already holds. 0: not searched.
+  // > 0 (metres): before any node is evaluated, find whether an open scan's closure goes on past
+  // the grid, within this reach of the grid's box, with the winding number and closing rule the
+  // labelling uses (HermiteStats::closure_beyond_grid). If it does, HermiteField returns at once
+  // with an unbuilt field (no brick allocated) and the caller grows the grid to hold the box and
+  // calls again (BuildField): each node is evaluated once. 0: not searched, always built.
   double closure_reach_m = 0.0;
   // The guarded packings (inner, outer and their shrink counts) of an earlier HermiteField on the
   // same samples, normals, r_max, leak_guard and voxel, to use instead of packing again: they do not
@@ -141,12 +143,12 @@ struct HermiteStats {
   bool samples_open = false;
   // The samples' surface area, m^2: the sum of the winding number's area weights.
   double sample_area_m2 = 0.0;
-  // An open scan's closure beyond the grid (issue 20; HermiteOptions::closure_reach_m). Where w is
-  // unclear (0.3 <= w < 1/2) the inner balls of the 16 samples nearest decide, so the closure
-  // follows the scanned part's curvature and may reach past the grid fitted to the samples, where
-  // the grid faces would cut it flat. The box (metres) holds every node of a lattice of half a
-  // brick (4 voxels) outside the grid that the rule puts inside, widened by one lattice step;
-  // empty (std::nullopt) when there is none or it was not searched.
+  // An open scan's closure beyond the grid (issue 20; HermiteOptions::closure_reach_m; when set,
+  // the field returned is unbuilt). Where w is unclear (0.3 <= w < 1/2) the inner balls of the 16
+  // samples nearest decide, so the closure follows the scanned part's curvature and may reach past
+  // the grid fitted to the samples, where the grid faces would cut it flat. The box (metres) holds
+  // every node of a lattice of half a brick (4 voxels) outside the grid that the rule puts inside,
+  // widened by one lattice step; empty (std::nullopt) when there is none or it was not searched.
   std::optional<Eigen::AlignedBox3d> closure_beyond_grid;
   SparseField::LipschitzStats lipschitz;
   Packing inner;                  // guarded, metres
