@@ -1604,7 +1604,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
                 node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
       winding(q, w);
       for (std::size_t x = 0; x < w.size(); ++x) {
-        const ClosingRule::Balls ball = rule.BallPhi(w[x], q[x], &nearest);
+        // The low halo gives the gradient its w only: no node there is tested for a side.
+        constexpr auto kHs = static_cast<std::size_t>(kH);
+        const std::size_t a = x / (kHs * kHs), c = x / kHs % kHs, e = x % kHs;
+        const ClosingRule::Balls ball =
+            a == 0 || c == 0 || e == 0 ? ClosingRule::Balls{} : rule.BallPhi(w[x], q[x], &nearest);
         balls[x] = ball.phi / h;
         threshold[x] = ball.threshold;
       }
