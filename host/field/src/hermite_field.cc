@@ -1463,21 +1463,6 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const st
   return count;
 }
 
-// Inside/outside of every brick the evaluation left unallocated, from the winding number of the
-// samples (issue 20; replaces the majority vote of LabelUnallocatedBricks, which a hole, an open
-// scan or an outlier turns into phantom solid far from the surface). Inside is w >= 1/2, or w
-// unclear (>= kBallClosingWinding) within the inner ball of one of the kClosingBalls samples
-// nearest the node: an unscanned side is closed round, as the scanned part curves, not flat
-// across its rim. The side is decided at the brick corners (one lattice, (bricks + 1)^3
-// queries); a brick whose 8 corners agree is uniform on that side. A brick whose corners
-// disagree holds the closing surface (of a hole or of an unscanned side, far from any sample):
-// each node takes the first-order distance to it, min(d(w = 1/2), max(d(w = kBallClosingWinding),
-// d(balls))) with d(w = t) = (t - w) / |grad w| (central differences over 1 voxel), clamped to
-// the band; the Lipschitz projection then bounds it like any other value. So the closing surface
-// is smooth, never a staircase of brick faces.
-// `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions. On a closed set
-// with `hull_cut`, CutBeyondSampleHull follows the far pass; on an open set with `smooth_closure`,
-// SmoothClosure.
 // What decides the side of the nodes no sample reaches: the samples' winding number, their rims,
 // their convex hull and the closing rule. None of it depends on the grid's extent, so HermiteField
 // builds it once, before the band, and asks it first whether an open scan's closure leaves the
@@ -1516,6 +1501,21 @@ struct SideRules {
   const ClosingRule rule;
 };
 
+// Inside/outside of every brick the evaluation left unallocated, from the winding number of the
+// samples (issue 20; replaces the majority vote of LabelUnallocatedBricks, which a hole, an open
+// scan or an outlier turns into phantom solid far from the surface). Inside is w >= 1/2, or w
+// unclear (>= kBallClosingWinding) within the inner ball of one of the kClosingBalls samples
+// nearest the node: an unscanned side is closed round, as the scanned part curves, not flat
+// across its rim. The side is decided at the brick corners (one lattice, (bricks + 1)^3
+// queries); a brick whose 8 corners agree is uniform on that side. A brick whose corners
+// disagree holds the closing surface (of a hole or of an unscanned side, far from any sample):
+// each node takes the first-order distance to it, min(d(w = 1/2), max(d(w = kBallClosingWinding),
+// d(balls))) with d(w = t) = (t - w) / |grad w| (central differences over 1 voxel), clamped to
+// the band; the Lipschitz projection then bounds it like any other value. So the closing surface
+// is smooth, never a staircase of brick faces.
+// `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions, and `sides`
+// was built from them. On a closed set with `hull_cut`, CutBeyondSampleHull follows the far pass;
+// on an open set with `smooth_closure`, SmoothClosure.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                     const std::vector<V3>& guard_positions, const std::vector<V3>& guard_normals, const KdTree& tree,
                     const std::vector<double>& spacing, const SideRules& sides, bool hull_cut, bool smooth_closure,
