@@ -1029,11 +1029,13 @@ class ClosingRule {
         hull_beyond_(hull_beyond),
         sectors_(inner.radii.size()),
         medial_(inner.radii.size(), 0),
+        frames_(inner.radii.size()),
         far_centres_{&far_centre_points_} {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const V3& n = normals[i];
-        const auto [e1, e2] = detail::AngleFrame(n);
+        frames_[i] = detail::AngleFrame(n);
+        const auto [e1, e2] = frames_[i];
         const double r = inner.radii[i];
         const double tol = kContinueTolSpacings * spacing[i] + kContinueTolRadius * r;
         // The surface at the ball's point in radius direction u: the nearest sample's normal, if
@@ -1134,13 +1136,17 @@ class ClosingRule {
   // sample, in kBehindSectors sectors.
   bool Continues(std::size_t i, const V3& p) const {
     const std::uint8_t mask = sectors_[i];
+    // No sector, or all: the same answer for any p (medial balls have a sector).
+    static_assert(kBehindSectors <= kContinueSectors && kContinueSectors <= 8);
+    if (mask == 0) return false;
+    if (mask == (1u << kContinueSectors) - 1u) return true;
     const V3& n = normals_[i];
     const V3 d = p - positions_[i];
     const V3 t = d - d.dot(n) * n;
     if (t.norm() < kBehindShare * d.norm())
       return std::popcount(mask) >= kBehindSectors ||
              (medial_[i] != 0 && !hull_.empty() && !BeyondHull(hull_, p, hull_beyond_));
-    const auto [e1, e2] = detail::AngleFrame(n);
+    const auto& [e1, e2] = frames_[i];
     const double sector = std::atan2(-t.dot(e2), -t.dot(e1)) / (2.0 * std::numbers::pi / kContinueSectors);
     const int k = static_cast<int>(((std::lround(sector) % kContinueSectors) + kContinueSectors) % kContinueSectors);
     return ((mask >> k) & 1u) != 0;
@@ -1178,10 +1184,11 @@ class ClosingRule {
   const std::vector<V3>& normals_;
   const std::vector<Eigen::Vector4d>& hull_;  // the samples' convex hull (may be empty)
   double hull_beyond_;
-  std::vector<std::uint8_t> sectors_;   // bit k: the ball lies on the surface in sector k (Continues)
-  std::vector<std::uint8_t> medial_;    // 1: the ball's antipode lies on the surface, facing away
-  std::vector<std::size_t> far_balls_;  // the medial balls (kClosingBalls), for far_tree_
-  std::vector<V3> far_centre_points_;   // their centres
+  std::vector<std::uint8_t> sectors_;      // bit k: the ball lies on the surface in sector k (Continues)
+  std::vector<std::uint8_t> medial_;       // 1: the ball's antipode lies on the surface, facing away
+  std::vector<std::pair<V3, V3>> frames_;  // detail::AngleFrame of each sample's normal: the sectors' axes
+  std::vector<std::size_t> far_balls_;     // the medial balls (kClosingBalls), for far_tree_
+  std::vector<V3> far_centre_points_;      // their centres
   PointCloud far_centres_;
   std::unique_ptr<KdTree> far_tree_;  // over far_centres_; null when there are none
   double largest_radius_ = 0.0;       // metres, of far_balls_
