@@ -95,7 +95,6 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     double seconds = 0.0;              // of the unbuilt rounds, counted as distance time
     for (int round = 0;; ++round) {
       result.field = HermiteField(*grid, device_positions, unit_normals, r_max, hermite_options, &stats);
-      hermite_options.packed = nullptr;
       if (!stats.closure_beyond_grid) break;  // built
       hold.extend(*stats.closure_beyond_grid);
       hold = hold.intersection(Eigen::AlignedBox3d(lo - reach, hi + reach));

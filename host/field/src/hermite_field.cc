@@ -1627,15 +1627,16 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             q[static_cast<std::size_t>((a * kH + c) * kH + e)] =
                 node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
       winding(q, w);
-      for (std::size_t x = 0; x < w.size(); ++x) {
-        // The low halo gives the gradient its w only: no node there is tested for a side.
-        constexpr auto kHs = static_cast<std::size_t>(kH);
-        const std::size_t a = x / (kHs * kHs), c = x / kHs % kHs, e = x % kHs;
-        const ClosingRule::Balls ball =
-            a == 0 || c == 0 || e == 0 ? ClosingRule::Balls{} : rule.BallPhi(w[x], q[x], &nearest);
-        balls[x] = ball.phi / h;
-        threshold[x] = ball.threshold;
-      }
+      // The low halo gives the gradient its w only: no node there is tested for a side, and its
+      // balls and thresholds are never read.
+      for (int a = 1; a < kH; ++a)
+        for (int c = 1; c < kH; ++c)
+          for (int e = 1; e < kH; ++e) {
+            const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
+            const ClosingRule::Balls ball = rule.BallPhi(w[x], q[x], &nearest);
+            balls[x] = ball.phi / h;
+            threshold[x] = ball.threshold;
+          }
       float* values = field.BrickValues(b);
       const auto at = [&](int a, int c, int e) { return w[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
       const auto ball_at = [&](int a, int c, int e) { return balls[static_cast<std::size_t>((a * kH + c) * kH + e)]; };
