@@ -19,6 +19,9 @@ namespace {
 using V3 = Eigen::Vector3d;
 constexpr std::uint32_t kLeafSize = 8;
 constexpr std::uint32_t kParallelBuild = 1024;  // points of a node whose halves build in parallel
+// Batch's per-thread buffers are kept for the next call up to this many queries' worth (a plane
+// of a 1,200-cell grid); a larger batch frees them.
+constexpr std::size_t kKeptQueries = std::size_t{1} << 20;
 constexpr double kInv4Pi = 0.25 / std::numbers::pi;
 
 // One dipole's term; 0 at the dipole itself (q on a sample: the term is undefined there).
@@ -380,11 +383,16 @@ template <int kLanes>
     std::int32_t node;
     std::uint32_t begin, count;
   };
-  std::vector<Entry> stack;
-  stack.reserve(128);
-  std::vector<std::uint32_t> active(m);
+  // Kept per thread (kKeptQueries): callers batch a plane or a brick at a time, thousands of
+  // calls, and a plane's fresh buffers were mapped and unmapped by malloc at every call (fin90's
+  // closure search, 1.2 million points: half its time).
+  thread_local std::vector<Entry> stack;
+  thread_local std::vector<std::uint32_t> active;
+  thread_local std::vector<std::uint32_t> far;
+  stack.clear();
+  active.resize(m);
   std::iota(active.begin(), active.end(), 0U);
-  std::vector<std::uint32_t> far(m);
+  far.resize(m);
   V3 lo = queries[0], hi = queries[0];
   for (std::size_t i = 1; i < m; ++i) lo = lo.cwiseMin(queries[i]), hi = hi.cwiseMax(queries[i]);
   stack.push_back({lo, hi, 0, 0, static_cast<std::uint32_t>(m)});
@@ -465,6 +473,8 @@ template <int kLanes>
     near.node = node.right;
     stack.push_back(near);
   }
+  if (active.capacity() > 2 * kKeptQueries) active = {};
+  if (far.capacity() > kKeptQueries) far = {};
 }
 
 void WindingNumber::operator()(std::span<const V3> queries, std::span<double> out) const {
