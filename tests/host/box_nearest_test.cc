@@ -44,7 +44,7 @@ std::vector<std::pair<double, std::size_t>> BruteForce(const std::vector<V3>& po
 // Queries inside the box and on its surface (the farthest a query may be), k up to k_max.
 // Returns how many (query, k) pairs differed from brute force.
 int Mismatches(const std::vector<V3>& points, std::size_t leaf, std::size_t k_max, double radius, int boxes,
-               std::mt19937& rng) {
+               std::mt19937& rng, const V3& away = V3::Zero()) {
   const Cloud cloud{&points};
   const Tree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(leaf));
   palpa::field::BoxNearest<Tree> box(tree, points, k_max);
@@ -53,14 +53,14 @@ int Mismatches(const std::vector<V3>& points, std::size_t leaf, std::size_t k_ma
   std::vector<std::size_t> idx(k_max);
   std::vector<double> d2(k_max);
   for (int b = 0; b < boxes; ++b) {
-    const V3 centre = points[rng() % points.size()] + V3(unit(rng), unit(rng), unit(rng));
+    const V3 centre = points[rng() % points.size()] + V3(unit(rng), unit(rng), unit(rng)) + away;
     box.Box(centre, radius);
     for (int q = 0; q < 40; ++q) {
       V3 dir(unit(rng), unit(rng), unit(rng));
       dir.normalize();
       const V3 p = centre + (q % 2 == 0 ? radius : radius * 0.5 * (1.0 + unit(rng))) * dir;
       const std::vector<std::pair<double, std::size_t>> truth = BruteForce(points, p);
-      for (const std::size_t k : {std::size_t{1}, std::size_t{8}, k_max}) {
+      for (const std::size_t k : {std::size_t{1}, std::size_t{3}, std::size_t{8}, std::size_t{13}, k_max}) {
         const std::size_t got = box.Find(p, k, idx.data(), d2.data());
         bool same = got == std::min(k, points.size());
         for (std::size_t m = 0; same && m < got; ++m) same = idx[m] == truth[m].second && d2[m] == truth[m].first;
@@ -78,6 +78,9 @@ TEST(BoxNearest, FindsTheKNearestOfAnyPointInTheBox) {
   for (V3& p : points) p = V3(u(rng), u(rng), 0.3 * u(rng));
   // Boxes from a fraction of the spacing to several spacings wide.
   for (const double radius : {0.05, 0.6, 2.5}) EXPECT_EQ(Mismatches(points, 10, 48, radius, 30, rng), 0) << radius;
+  // Boxes far off the samples (the far pass's): long lists, scanned a block at a time.
+  for (const double radius : {0.6, 2.5})
+    EXPECT_EQ(Mismatches(points, 10, 48, radius, 10, rng, V3(0.0, 0.0, 12.0)), 0) << radius;
 }
 
 TEST(BoxNearest, BreaksTiesByIndexWhateverTheTree) {

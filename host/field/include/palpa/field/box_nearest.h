@@ -8,8 +8,10 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <utility>
 #include <vector>
 
@@ -42,19 +44,17 @@ class BoxNearest {
   /// (squared metres), nearest first, ties by lower index. Returns how many.
   std::size_t Find(const Eigen::Vector3d& p, std::size_t k, std::size_t* idx, double* d2) {
     if (!ready_) Prepare();
+    if (k == 0) return 0;
     const double from_centre = (p - centre_).norm();
+    const double px = p.x(), py = p.y(), pz = p.z();
+    const std::size_t real = list_.size(), n = from_.size();  // from_, x_, y_, z_: padded to kBlock
+    // L2_Simple_Adaptor::evalMetric's sum, term by term.
+    const auto distance = [&](std::size_t m) {
+      const double dx = px - x_[m], dy = py - y_[m], dz = pz - z_[m];
+      return (dx * dx + dy * dy) + dz * dz;
+    };
     std::size_t count = 0;
-    for (const auto& [from, j] : list_) {
-      // Sorted by distance from the centre: past p's distance from it plus the k-th distance so
-      // far, no sample is nearer p (the margin covers rounding of the square roots).
-      if (count == k && from > (from_centre + std::sqrt(d2[k - 1])) * (1.0 + 1e-9)) break;
-      const Eigen::Vector3d& q = positions_[j];
-      double dist = 0.0;
-      for (Eigen::Index a = 0; a < 3; ++a) {  // L2_Simple_Adaptor::evalMetric's sum, term by term
-        const double diff = p[a] - q[a];
-        dist += diff * diff;
-      }
-      if (count == k && !(dist < d2[k - 1] || (dist == d2[k - 1] && j < idx[k - 1]))) continue;
+    const auto insert = [&](double dist, std::size_t j) {
       std::size_t i = count < k ? count++ : k - 1;
       for (; i > 0 && (d2[i - 1] > dist || (d2[i - 1] == dist && idx[i - 1] > j)); --i) {
         d2[i] = d2[i - 1];
@@ -62,11 +62,38 @@ class BoxNearest {
       }
       d2[i] = dist;
       idx[i] = j;
+    };
+    // Sorted by distance from the centre: past p's distance from it plus the k-th distance so far,
+    // no sample is nearer p (the margin covers rounding of the square roots).
+    const auto past = [&](std::size_t m) { return from_[m] > (from_centre + std::sqrt(d2[k - 1])) * (1.0 + 1e-9); };
+    const auto offer = [&](double dist, std::size_t j) {
+      if (dist < d2[k - 1] || (dist == d2[k - 1] && j < idx[k - 1])) insert(dist, j);
+    };
+    std::size_t m = 0;
+    for (; m < real && count < k; ++m) insert(distance(m), index_[m]);
+    if (count < k) return count;
+    for (; m % kBlock != 0; ++m) {
+      if (past(m)) return count;
+      offer(distance(m), index_[m]);
+    }
+    // Then a block at a time, up to the block that starts past the bound: a sample of that last
+    // block past it lies farther than the k-th, so it is measured and dropped (padding too: +inf).
+    for (; m < n; m += kBlock) {
+      if (past(m)) break;
+      std::array<double, kBlock> dist;
+      for (std::size_t l = 0; l < kBlock; ++l) dist[l] = distance(m + l);
+      const double worst = d2[k - 1];
+      bool any = false;
+      for (std::size_t l = 0; l < kBlock; ++l) any = any || !(dist[l] > worst);
+      if (!any) continue;
+      for (std::size_t l = 0; l < kBlock; ++l) offer(dist[l], index_[m + l]);
     }
     return count;
   }
 
  private:
+  static constexpr std::size_t kBlock = 4;
+
   void Prepare() {
     ready_ = true;
     list_.clear();
@@ -85,6 +112,26 @@ class BoxNearest {
       for (const auto& [j, dist] : found_) list_.emplace_back(std::sqrt(dist), j);
     }
     std::sort(list_.begin(), list_.end());
+    // The list side by side, padded to whole blocks with samples at infinity (distance +inf: never
+    // kept): the scan reads them in order instead of scattered through positions_, a block of
+    // distances at a time (a far box's list holds thousands, and its scan was most of the time).
+    const std::size_t n = list_.size();
+    const std::size_t padded = (n + kBlock - 1) / kBlock * kBlock;
+    constexpr double kFar = std::numeric_limits<double>::infinity();
+    from_.assign(padded, kFar);
+    x_.assign(padded, kFar);
+    y_.assign(padded, kFar);
+    z_.assign(padded, kFar);
+    index_.resize(n);
+    for (std::size_t m = 0; m < n; ++m) {
+      const auto& [from, j] = list_[m];
+      from_[m] = from;
+      x_[m] = positions_[j].x();
+      y_[m] = positions_[j].y();
+      z_[m] = positions_[j].z();
+      index_[m] = j;
+    }
+    index_.resize(padded, positions_.size());
   }
 
   const Tree& tree_;
@@ -94,6 +141,8 @@ class BoxNearest {
   double radius_ = 0.0;
   bool ready_ = false;
   std::vector<std::pair<double, std::size_t>> list_;  // (distance from the centre, sample)
+  std::vector<double> from_, x_, y_, z_;              // list_ in order: distance from the centre, position
+  std::vector<std::size_t> index_;                    // and sample (padding: positions_.size())
   std::vector<std::size_t> idx_;
   std::vector<double> d2_;
   std::vector<std::pair<std::size_t, double>> found_;
