@@ -1014,7 +1014,8 @@ TEST(Winding, OneSidedScanIsClosedRoundBelowItsRim) {
 // so BuildField grows the grid, voxel kept, to hold it; past the rim, where w falls to ~0.2, the
 // rim's inner balls close the sphere round. Every node more than a band from the sphere has the
 // ball's sign, and no face node is inside. Without the growth the grid cuts the sphere flat: its
-// bottom face layer, inside the true sphere, is outside.
+// bottom face layer, inside the true sphere, is outside. The grown grid is built with the search's
+// packing and side rules (HermiteStats::side_rules), into the same field as made afresh.
 TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
   const auto pts = ReadPoints(DataFile("sphere926.pwn"));
   ASSERT_TRUE(pts) << pts.error().message;
@@ -1041,6 +1042,7 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
   ASSERT_TRUE(built) << built.error().message;
   const GridSpec& g = built->field.grid();
   EXPECT_GT(built->grid_grown_from[2], 0);
+  EXPECT_TRUE(built->hermite.side_rules_reused);  // from the search's unbuilt call
   EXPECT_GT(g.dims[2], built->grid_grown_from[2]);
   EXPECT_LT(g.origin_m.z(), -r);  // the whole sphere is in the grid
   const auto [wrong, face_inside] = wrong_and_faces(*built);
@@ -1081,14 +1083,28 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
   EXPECT_LT(first.closure_beyond_grid->min().z(), fitted->origin_m.z());
   EXPECT_EQ(first.bricks_evaluated, 0u);
   EXPECT_EQ(unbuilt.AllocatedBricks(), 0u);
+  ASSERT_NE(first.side_rules, nullptr);  // for the next call, which builds
   HermiteStats once;
   const SparseField direct = HermiteField(g, p, unit, r_max, {}, &once);
   EXPECT_EQ(once.bricks_evaluated, built->hermite.bricks_evaluated);
-  std::size_t differ = 0;
+  EXPECT_EQ(once.side_rules, nullptr);
+  // The unbuilt call's packing and side rules, reused on the grown grid: the same field as made
+  // afresh (they do not depend on the grid).
+  HermiteOptions again;
+  again.packed = &first;
+  HermiteStats second;
+  const SparseField reused = HermiteField(g, p, unit, r_max, again, &second);
+  EXPECT_TRUE(second.side_rules_reused);
+  EXPECT_FALSE(once.side_rules_reused);
+  std::size_t differ = 0, differ_reused = 0;
   for (int i = 0; i < g.dims[0]; ++i)
     for (int j = 0; j < g.dims[1]; ++j)
-      for (int k = 0; k < g.dims[2]; ++k) differ += direct.Value(i, j, k) != built->field.Value(i, j, k) ? 1u : 0u;
+      for (int k = 0; k < g.dims[2]; ++k) {
+        differ += direct.Value(i, j, k) != built->field.Value(i, j, k) ? 1u : 0u;
+        differ_reused += reused.Value(i, j, k) != direct.Value(i, j, k) ? 1u : 0u;
+      }
   EXPECT_EQ(differ, 0u);
+  EXPECT_EQ(differ_reused, 0u);
 }
 
 // Issue 20: a post cut flat and scanned without its bottom (a wrist, a hub, a part's foot: a

@@ -2086,6 +2086,43 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
 
 }  // namespace
 
+// HermiteStats::side_rules: the side rules with what they refer to, owned together so that a later
+// call can use them (the rules hold references to the tree, spacing and packing).
+struct HermiteSideRules {
+  HermiteSideRules(const std::vector<V3>& positions_in, const std::vector<V3>& normals_in,
+                   const std::vector<double>& spacing_in, const Packing& inner_in,
+                   const std::vector<V3>& guard_positions, double voxel, bool hull_cut_in)
+      : positions(&positions_in),
+        normals(&normals_in),
+        voxel_m(voxel),
+        hull_cut(hull_cut_in),
+        guards(guard_positions.size()),
+        spacing(spacing_in),
+        inner(inner_in),
+        cloud{&positions_in},
+        tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10)),
+        sides(tree, positions_in, normals_in, guard_positions, spacing, inner, voxel, hull_cut_in) {}
+  HermiteSideRules(const HermiteSideRules&) = delete;
+  HermiteSideRules& operator=(const HermiteSideRules&) = delete;
+  // Made from these samples (the same vectors), voxel and options.
+  bool Fits(const std::vector<V3>& positions_in, const std::vector<V3>& normals_in, double voxel, bool hull_cut_in,
+            std::size_t guards_in) const {
+    return positions == &positions_in && normals == &normals_in && voxel_m == voxel && hull_cut == hull_cut_in &&
+           guards == guards_in;
+  }
+
+  const std::vector<V3>* positions;
+  const std::vector<V3>* normals;
+  double voxel_m;
+  bool hull_cut;
+  std::size_t guards;
+  const std::vector<double> spacing;
+  const Packing inner;
+  const PointCloud cloud;
+  const KdTree tree;
+  const SideRules sides;
+};
+
 SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions, const std::vector<V3>& normals,
                          double r_max, const HermiteOptions& options, HermiteStats* stats) {
   SparseField field(grid);
@@ -2097,7 +2134,27 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   HermiteStats& st = stats != nullptr ? *stats : local;
 
   auto start = std::chrono::steady_clock::now();
-  const std::vector<double> spacing = SampleSpacing(positions);
+  // The guards (HermiteOptions::guard_positions) with unit normals; none when the sizes differ.
+  std::vector<V3> guard_positions, guard_normals;
+  if (options.guard_positions.size() == options.guard_normals.size()) {
+    for (std::size_t g = 0; g < options.guard_positions.size(); ++g) {
+      const double length = options.guard_normals[g].norm();
+      if (!(length > 0.0) || !std::isfinite(length) || !options.guard_positions[g].allFinite()) continue;
+      guard_positions.push_back(options.guard_positions[g]);
+      guard_normals.push_back(options.guard_normals[g] / length);
+    }
+  }
+  // An unbuilt call's side rules on the same samples (HermiteStats::side_rules): its spacing,
+  // tree and rules, not made again.
+  const std::shared_ptr<const HermiteSideRules> reuse =
+      options.winding_labels && options.packed != nullptr && options.packed->side_rules != nullptr &&
+              options.packed->side_rules->Fits(positions, normals, h, options.hull_cut, guard_positions.size())
+          ? options.packed->side_rules
+          : nullptr;
+  st.side_rules_reused = reuse != nullptr;
+  std::vector<double> own_spacing;
+  if (reuse == nullptr) own_spacing = SampleSpacing(positions);
+  const std::vector<double>& spacing = reuse != nullptr ? reuse->spacing : own_spacing;
   std::vector<V3> flipped(n);
   for (std::size_t i = 0; i < n; ++i) flipped[i] = -normals[i];
   if (options.packed != nullptr) {
@@ -2108,16 +2165,6 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   } else {
     tbb::parallel_invoke([&] { st.inner = PackSpheres(positions, normals, r_max); },
                          [&] { st.outer = PackSpheres(positions, flipped, r_max); });
-  }
-  // The guards (HermiteOptions::guard_positions) with unit normals; none when the sizes differ.
-  std::vector<V3> guard_positions, guard_normals;
-  if (options.guard_positions.size() == options.guard_normals.size()) {
-    for (std::size_t g = 0; g < options.guard_positions.size(); ++g) {
-      const double length = options.guard_normals[g].norm();
-      if (!(length > 0.0) || !std::isfinite(length) || !options.guard_positions[g].allFinite()) continue;
-      guard_positions.push_back(options.guard_positions[g]);
-      guard_normals.push_back(options.guard_normals[g] / length);
-    }
   }
   if (options.leak_guard && options.packed == nullptr) {
     // The dropped samples' discs bound the balls too (GuardPacking's entries past the balls),
@@ -2150,23 +2197,33 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   st.seconds_packing = SecondsSince(start);
 
   start = std::chrono::steady_clock::now();
+  // The tree over the samples, with the side rules when the winding number labels (theirs, or the
+  // unbuilt call's).
+  std::shared_ptr<const HermiteSideRules> rules = reuse;
   const PointCloud cloud{&positions};
-  const KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
-  std::optional<SideRules> sides;
+  std::optional<KdTree> own_tree;
+  if (rules == nullptr && !options.winding_labels)
+    own_tree.emplace(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  const SideRules* sides = nullptr;
   if (options.winding_labels) {
     const auto phase = std::chrono::steady_clock::now();
-    sides.emplace(tree, positions, normals, guard_positions, spacing, st.inner, h, options.hull_cut);
+    if (rules == nullptr)
+      rules = std::make_shared<const HermiteSideRules>(positions, normals, spacing, st.inner, guard_positions, h,
+                                                       options.hull_cut);
+    sides = &rules->sides;
     // An open scan's closure past the grid: the caller grows the grid first (HermiteOptions::
     // closure_reach_m), so no node is evaluated twice.
     if (options.closure_reach_m > 0.0) {
       st.closure_beyond_grid = ClosureBeyondGrid(grid, st.inner, options.closure_reach_m, sides->winding, sides->rule);
       if (st.closure_beyond_grid) {
+        st.side_rules = rules;
         st.seconds_distance = SecondsSince(start);
         return field;
       }
     }
     st.seconds_project = SecondsSince(phase);
   }
+  const KdTree& tree = rules != nullptr ? rules->tree : *own_tree;
   const auto patches_start = std::chrono::steady_clock::now();
   Model model;
   model.patches.resize(n);
