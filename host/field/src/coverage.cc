@@ -24,28 +24,6 @@ struct Count {
   std::size_t uncovered = 0;
 };
 
-// nanoflann result set: whether any sample lies at squared distance <= bound_sq, stopping at the
-// first (the nearest's distance is not needed, and near the samples the search ends at once).
-class AnyWithin {
- public:
-  explicit AnyWithin(double bound_sq) : bound_sq_(bound_sq), search_sq_(bound_sq * (1.0 + 1e-9) + 1e-300) {}
-  void init() {}
-  void clear() {}
-  std::size_t size() const { return found_ ? 1 : 0; }
-  bool full() const { return true; }
-  // A little wider than the bound (nanoflann visits d^2 < worstDist), so that rounding drops none.
-  double worstDist() const { return search_sq_; }
-  bool addPoint(double dist_sq, std::size_t /*j*/) {
-    found_ = dist_sq <= bound_sq_;
-    return !found_;
-  }
-  bool found() const { return found_; }
-
- private:
-  double bound_sq_, search_sq_;
-  bool found_ = false;
-};
-
 }  // namespace
 
 Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& samples) {
@@ -56,7 +34,6 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
   const detail::PointCloud cloud{&samples};
   const detail::KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   out.min_distance_m = std::max(kCoverSpacings * detail::Median(SampleSpacing(samples, 1)), h);
-  const double min_d2 = out.min_distance_m * out.min_distance_m;
   constexpr int kB = SparseField::kBrick;
   const std::array<int, 3>& bd = field.brick_dims();
   const std::size_t bricks =
@@ -71,7 +48,7 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
           const double t = here / (here - there);  // the zero along the edge, in [0, 1]
           V3 p = grid.origin_m + h * V3(i, j, k);
           p[s] += h * t;
-          AnyWithin near(min_d2);
+          detail::AnyWithin near(out.min_distance_m);
           tree.findNeighbors(near, p.data(), nanoflann::SearchParams());
           if (!near.found()) ++c.uncovered;
         };

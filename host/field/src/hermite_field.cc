@@ -240,6 +240,7 @@ constexpr float kCullSlackVoxels = 0.01f;
 // Lipschitz projection, never left as a jump.
 constexpr float kCentreTestMarginVoxels = 1.0f;
 
+using detail::AnyWithin;
 using detail::KdTree;
 using detail::PointCloud;
 
@@ -277,28 +278,6 @@ class CrossingResult {
   const std::vector<V3>& positions_;
   const std::vector<V3>& normals_;
   std::vector<std::size_t>& out_;
-};
-
-// nanoflann result set: is any sample within `radius` of the query (sqrt(d^2) <= radius, the test
-// the nearest sample's distance would take)? The search stops at the first; the bound the tree
-// prunes with is a little wider than radius^2, so that none is missed by rounding.
-class AnyWithin {
- public:
-  explicit AnyWithin(double radius) : radius_(radius), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
-  void init() {}
-  void clear() {}
-  std::size_t size() const { return found_ ? 1 : 0; }
-  bool full() const { return true; }
-  double worstDist() const { return bound_sq_; }
-  bool addPoint(double dist_sq, std::size_t /*j*/) {
-    found_ = std::sqrt(dist_sq) <= radius_;
-    return !found_;
-  }
-  bool found() const { return found_; }
-
- private:
-  double radius_, bound_sq_;
-  bool found_ = false;
 };
 
 // The far pass's and the centre tests' neighbour searches (palpa/field/box_nearest.h).

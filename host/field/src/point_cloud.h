@@ -37,6 +37,28 @@ struct PointCloud {
 using KdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::size_t>;
 
+// nanoflann result set: is any sample within `radius` of the query (sqrt(d^2) <= radius, the test
+// the nearest sample's distance would take)? The search stops at the first; the bound the tree
+// prunes with is a little wider than radius^2, so that none is missed by rounding.
+class AnyWithin {
+ public:
+  explicit AnyWithin(double radius) : radius_(radius), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+  void init() {}
+  void clear() {}
+  std::size_t size() const { return found_ ? 1 : 0; }
+  bool full() const { return true; }
+  double worstDist() const { return bound_sq_; }
+  bool addPoint(double dist_sq, std::size_t /*j*/) {
+    found_ = std::sqrt(dist_sq) <= radius_;
+    return !found_;
+  }
+  bool found() const { return found_; }
+
+ private:
+  double radius_, bound_sq_;
+  bool found_ = false;
+};
+
 // Leaf size for searches whose result does not depend on the order the tree visits samples in
 // (a minimum, a list sorted afterwards, whether any sample lies within a radius, the nearest
 // distance): the packing's and the guard's wide balls visit fewer nodes than with leaves of 10
