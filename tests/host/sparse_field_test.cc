@@ -260,6 +260,37 @@ TEST(WriteQ16, NodesOutsideStayOutside) {
   }
 }
 
+// A brick's neighbourhood reads every node within one brick of it as Value does: stored bricks,
+// uniform inside and outside ones, and the grid's last, partial bricks (21 nodes: 8 + 8 + 5).
+TEST(SparseField, NeighbourhoodReadsAsValue) {
+  const GridSpec g = Grid(21, 17, 19, 4);
+  SparseField f(g);
+  const auto& bd = f.brick_dims();
+  std::vector<std::uint8_t> some(static_cast<std::size_t>(bd[0] * bd[1] * bd[2]), 0);
+  for (std::size_t b = 0; b < some.size(); b += 2) some[b] = 1;
+  f.AllocateAll(some);
+  f.SetUniform(f.BrickIndex(1, 1, 0), true);
+  f.SetUniform(f.BrickIndex(2, 0, 1), true);
+  constexpr int kB = SparseField::kBrick;
+  for (std::size_t b = 0; b < some.size(); ++b) {
+    float* v = f.BrickValues(b);
+    for (int n = 0; v != nullptr && n < SparseField::kBrickNodes; ++n)
+      v[n] = static_cast<float>((static_cast<int>(b) * 37 + n * 11) % 71) / 10.0f - 3.5f;
+  }
+  int checked = 0;
+  for (int bi = 0; bi < bd[0]; ++bi)
+    for (int bj = 0; bj < bd[1]; ++bj)
+      for (int bk = 0; bk < bd[2]; ++bk) {
+        const SparseField::Neighbourhood near = f.Neighbours({bi, bj, bk});
+        for (int i = std::max(0, bi * kB - kB); i < std::min(g.dims[0], bi * kB + 2 * kB); ++i)
+          for (int j = std::max(0, bj * kB - kB); j < std::min(g.dims[1], bj * kB + 2 * kB); ++j)
+            for (int k = std::max(0, bk * kB - kB); k < std::min(g.dims[2], bk * kB + 2 * kB); ++k, ++checked)
+              ASSERT_EQ(near.Value(i, j, k), f.Value(i, j, k)) << bi << bj << bk << " " << i << " " << j << " " << k;
+      }
+  EXPECT_GT(checked, 27 * 21 * 17 * 19 / 2);
+  EXPECT_EQ(f.Value(10, 10, 3), -4.0f);  // a uniform inside brick is read
+}
+
 // SmoothBand's [1 2 1] / 4 per axis: exact on a linear field, and node noise of RMS e left at
 // e * (6/16)^(3/2) = 0.23 e (the kernel's sum of squared weights).
 TEST(SmoothBand, KeepsALinearFieldAndAveragesNodeNoise) {

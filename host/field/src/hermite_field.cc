@@ -1258,32 +1258,13 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
         flip[m].clear();
         if (active[m] == 0) continue;
         const std::array<int, 3> bc = field.BrickCoords(bricks[m]);
-        // The 27 bricks about it, each looked up once: stored values, or a uniform side (null).
-        std::array<const float*, 27> near_values{};
-        std::array<std::uint8_t, 27> near_side{};
-        for (int n = 0; n < 27; ++n) {
-          const std::array<int, 3> nb{bc[0] + n / 9 - 1, bc[1] + n / 3 % 3 - 1, bc[2] + n % 3 - 1};
-          if (nb[0] < 0 || nb[1] < 0 || nb[2] < 0 || nb[0] >= bd[0] || nb[1] >= bd[1] || nb[2] >= bd[2]) continue;
-          const std::size_t b = field.BrickIndex(nb[0], nb[1], nb[2]);
-          const std::int32_t stored = field.Slot(b);
-          near_side[static_cast<std::size_t>(n)] = stored == SparseField::kUniformInside ? 1 : 0;
-          if (stored >= 0) near_values[static_cast<std::size_t>(n)] = field.BrickValues(b);
-        }
-        const auto brick_of = [](int a) { return a < 0 ? 0 : a < kB ? 1 : 2; };
+        const SparseField::Neighbourhood around = field.Neighbours(bc);
         for (int a = -1; a <= kB; ++a)
           for (int c = -1; c <= kB; ++c)
             for (int e = -1; e <= kB; ++e) {
               const int i = bc[0] * kB + a, j = bc[1] * kB + c, k = bc[2] * kB + e;
               const bool in_grid = i >= 0 && j >= 0 && k >= 0 && i < dims[0] && j < dims[1] && k < dims[2];
-              std::uint8_t here = 2;
-              if (in_grid) {
-                const auto n = static_cast<std::size_t>((brick_of(a) * 3 + brick_of(c)) * 3 + brick_of(e));
-                const float* v = near_values[n];
-                here = v == nullptr                                                              ? near_side[n]
-                       : v[((i & (kB - 1)) * kB + (j & (kB - 1))) * kB + (k & (kB - 1))] <= 0.0f ? 1
-                                                                                                 : 0;
-              }
-              side[cell(a + 1, c + 1, e + 1)] = here;
+              side[cell(a + 1, c + 1, e + 1)] = !in_grid ? 2 : around.Value(i, j, k) <= 0.0f ? 1 : 0;
             }
         // All of one side: no vote changes a node (most bricks, away from the closure).
         const auto both = [&] {

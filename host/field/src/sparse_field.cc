@@ -430,6 +430,22 @@ std::size_t SparseField::LabelUnallocatedBricks() {
   return minority;
 }
 
+SparseField::Neighbourhood SparseField::Neighbours(const std::array<int, 3>& bc) const {
+  const auto band = static_cast<float>(grid_.band_voxels);
+  Neighbourhood near;
+  near.centre_ = bc;
+  for (int n = 0; n < 27; ++n) {
+    const std::array<int, 3> nb{bc[0] + n / 9 - 1, bc[1] + n / 3 % 3 - 1, bc[2] + n % 3 - 1};
+    if (nb[0] < 0 || nb[1] < 0 || nb[2] < 0 || nb[0] >= brick_dims_[0] || nb[1] >= brick_dims_[1] ||
+        nb[2] >= brick_dims_[2])
+      continue;  // no grid node lies there
+    const std::int32_t slot = slots_[BrickIndex(nb[0], nb[1], nb[2])];
+    near.values_[static_cast<std::size_t>(n)] = slot >= 0 ? Stored(slot) : nullptr;
+    near.uniform_[static_cast<std::size_t>(n)] = slot == kUniformInside ? -band : band;
+  }
+  return near;
+}
+
 void SparseField::SmoothBand() {
   const auto band = static_cast<float>(grid_.band_voxels);
   std::vector<std::size_t> bricks;
@@ -445,34 +461,14 @@ void SparseField::SmoothBand() {
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::array<int, 3> bc = BrickCoords(bricks[m]);
       const BrickBox box = Box(bc[0], bc[1], bc[2]);
-      // The 27 bricks about it, each looked up once (Value's answer: stored, or the uniform value);
-      // one Value per halo node was most of the filter's time.
-      std::array<const float*, 27> near{};
-      std::array<float, 27> uniform{};
-      for (int n = 0; n < 27; ++n) {
-        const std::array<int, 3> nb{bc[0] + n / 9 - 1, bc[1] + n / 3 % 3 - 1, bc[2] + n % 3 - 1};
-        if (nb[0] < 0 || nb[1] < 0 || nb[2] < 0 || nb[0] >= brick_dims_[0] || nb[1] >= brick_dims_[1] ||
-            nb[2] >= brick_dims_[2])
-          continue;  // no clamped node lies there
-        const std::int32_t slot = slots_[BrickIndex(nb[0], nb[1], nb[2])];
-        near[static_cast<std::size_t>(n)] = slot >= 0 ? Stored(slot) : nullptr;
-        uniform[static_cast<std::size_t>(n)] = slot == kUniformInside ? -band : band;
-      }
+      const Neighbourhood near = Neighbours(bc);
       // The halo, nodes past the grid's edge replaced by the nearest grid node.
       for (int a = 0; a < kH; ++a) {
         const int i = std::clamp(bc[0] * kBrick + a - 1, 0, grid_.dims[0] - 1);
-        const int ni = (i >> kBrickLog2) - bc[0] + 1;
         for (int b = 0; b < kH; ++b) {
           const int j = std::clamp(bc[1] * kBrick + b - 1, 0, grid_.dims[1] - 1);
-          const int nj = (j >> kBrickLog2) - bc[1] + 1;
-          for (int c = 0; c < kH; ++c) {
-            const int k = std::clamp(bc[2] * kBrick + c - 1, 0, grid_.dims[2] - 1);
-            const auto n = static_cast<std::size_t>((ni * 3 + nj) * 3 + (k >> kBrickLog2) - bc[2] + 1);
-            const float* v = near[n];
-            x[at(a, b, c)] = v != nullptr
-                                 ? v[((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick + (k & (kBrick - 1))]
-                                 : uniform[n];
-          }
+          for (int c = 0; c < kH; ++c)
+            x[at(a, b, c)] = near.Value(i, j, std::clamp(bc[2] * kBrick + c - 1, 0, grid_.dims[2] - 1));
         }
       }
       // Separable passes: x over the brick's rows and the halo's y, z; then y; then z.

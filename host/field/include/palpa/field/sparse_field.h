@@ -55,6 +55,31 @@ class SparseField {
 
   // phi at node (i, j, k) in voxels, in [-band, +band].
   float Value(int i, int j, int k) const;
+
+  // The 27 bricks about one brick, each looked up once, for reading its nodes and a one-node halo
+  // round them (SmoothBand, the closure vote): a Value call per halo node was most of those passes'
+  // time. Holds pointers into the field: valid until a brick is allocated or made uniform.
+  class Neighbourhood {
+   public:
+    // phi at node (i, j, k) in voxels, as Value: (i, j, k) must be a grid node within one brick of
+    // the centre brick along each axis (unchecked).
+    float Value(int i, int j, int k) const {
+      const auto n =
+          static_cast<std::size_t>((((i >> kBrickLog2) - centre_[0] + 1) * 3 + (j >> kBrickLog2) - centre_[1] + 1) * 3 +
+                                   (k >> kBrickLog2) - centre_[2] + 1);
+      const float* v = values_[n];
+      return v != nullptr ? v[((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick + (k & (kBrick - 1))]
+                          : uniform_[n];
+    }
+
+   private:
+    friend class SparseField;
+    std::array<int, 3> centre_{};
+    std::array<const float*, 27> values_{};  // (di * 3 + dj) * 3 + dk for offsets -1..1; null: uniform
+    std::array<float, 27> uniform_{};        // +-band of a uniform brick (0 past the grid's edge)
+  };
+  // The neighbourhood of brick (bi, bj, bk) = `bc`.
+  Neighbourhood Neighbours(const std::array<int, 3>& bc) const;
   std::size_t AllocatedBricks() const { return stored_; }
   // Nodes with phi <= 0 (parallel; deterministic). Uniform bricks count without a per-node scan.
   std::size_t CountInside() const;
