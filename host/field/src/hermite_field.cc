@@ -1252,50 +1252,68 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
   for (int round = 0; round < rounds; ++round) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bricks.size(), 4), [&](const auto& r) {
       // 1 inside, 0 outside, 2 no grid node; (a, c, e) of the brick at (a + 1, c + 1, e + 1).
-      std::vector<std::uint8_t> side(cell(kH, 0, 0));
-      std::vector<std::uint16_t> count(side.size()), summed(side.size());
+      std::array<std::uint8_t, static_cast<std::size_t>(kH * kH * kH)> side{};
+      // The block sums' terms and sums: inside and grid nodes (bits 0-7 and 8-15).
+      std::array<std::uint16_t, static_cast<std::size_t>(kH * kH * kH)> count{}, summed{};
       for (std::size_t m = r.begin(); m != r.end(); ++m) {
         flip[m].clear();
         if (active[m] == 0) continue;
         const std::array<int, 3> bc = field.BrickCoords(bricks[m]);
         const SparseField::Neighbourhood around = field.Neighbours(bc);
-        for (int a = -1; a <= kB; ++a)
-          for (int c = -1; c <= kB; ++c)
-            for (int e = -1; e <= kB; ++e) {
-              const int i = bc[0] * kB + a, j = bc[1] * kB + c, k = bc[2] * kB + e;
-              const bool in_grid = i >= 0 && j >= 0 && k >= 0 && i < dims[0] && j < dims[1] && k < dims[2];
-              side[cell(a + 1, c + 1, e + 1)] = !in_grid ? 2 : around.Value(i, j, k) <= 0.0f ? 1 : 0;
+        unsigned seen = 0;
+        const int k0 = bc[2] * kB;                     // the grid's k of the brick's e = 1
+        const int k_end = std::min(kB, dims[2] - k0);  // the brick's nodes within the grid
+        for (int a = 0; a < kH; ++a) {
+          const int i = bc[0] * kB + a - 1;
+          for (int c = 0; c < kH; ++c) {
+            const int j = bc[1] * kB + c - 1;
+            const std::size_t at = cell(a, c, 0);
+            const auto set = [&](std::size_t x, std::uint8_t here) {
+              side[x] = here;
+              count[x] = here == 2 ? 0 : here == 1 ? 0x101 : 0x100;
+              seen |= here == 2 ? 0u : 1u << here;
+            };
+            if (i < 0 || j < 0 || i >= dims[0] || j >= dims[1]) {
+              for (int e = 0; e < kH; ++e) set(at + static_cast<std::size_t>(e), 2);
+              continue;
             }
-        // All of one side: no vote changes a node (most bricks, away from the closure).
-        const auto both = [&] {
-          std::uint8_t seen = 0;
-          for (const std::uint8_t x : side) seen = static_cast<std::uint8_t>(seen | (x == 2 ? 0 : 1u << x));
-          return seen == 3;
-        };
-        if (!both()) continue;
-        // The block sums, one axis at a time: inside and grid nodes (bits 0-7 and 8-15 of each sum).
-        for (std::size_t x = 0; x < side.size(); ++x) count[x] = side[x] == 2 ? 0 : side[x] == 1 ? 0x101 : 0x100;
-        for (int pass = 0; pass < 3; ++pass) {
-          const std::array<int, 3> step{pass == 0 ? 1 : 0, pass == 1 ? 1 : 0, pass == 2 ? 1 : 0};
-          for (int a = 0; a < kH; ++a)
-            for (int c = 0; c < kH; ++c)
-              for (int e = 0; e < kH; ++e) {
-                const bool edge = (step[0] != 0 && (a == 0 || a == kH - 1)) ||
-                                  (step[1] != 0 && (c == 0 || c == kH - 1)) ||
-                                  (step[2] != 0 && (e == 0 || e == kH - 1));
-                summed[cell(a, c, e)] =
-                    edge ? 0
-                         : static_cast<std::uint16_t>(count[cell(a - step[0], c - step[1], e - step[2])] +
-                                                      count[cell(a, c, e)] +
-                                                      count[cell(a + step[0], c + step[1], e + step[2])]);
-              }
-          std::swap(count, summed);
+            // Row (i, j) from the brick below along k (its last node), this one, and the one above
+            // (its first node).
+            float uniform = 0.0f;
+            const float* row = around.Row(i, j, -1, &uniform);
+            set(at, k0 == 0 ? 2 : (row != nullptr ? row[kB - 1] : uniform) <= 0.0f ? 1 : 0);
+            row = around.Row(i, j, 0, &uniform);
+            for (int e = 0; e < kB; ++e)
+              set(at + static_cast<std::size_t>(e + 1), e >= k_end                                    ? 2
+                                                        : (row != nullptr ? row[e] : uniform) <= 0.0f ? 1
+                                                                                                      : 0);
+            row = around.Row(i, j, 1, &uniform);
+            set(at + kH - 1, k0 + kB >= dims[2] ? 2 : (row != nullptr ? row[0] : uniform) <= 0.0f ? 1 : 0);
+          }
         }
+        // All of one side: no vote changes a node.
+        if (seen != 3) continue;
+        // The block sums, one axis at a time (e, c, then a), each only where the next reads it.
+        for (int a = 0; a < kH; ++a)
+          for (int c = 0; c < kH; ++c)
+            for (int e = 1; e <= kB; ++e)
+              summed[cell(a, c, e)] = static_cast<std::uint16_t>(count[cell(a, c, e - 1)] + count[cell(a, c, e)] +
+                                                                 count[cell(a, c, e + 1)]);
+        for (int a = 0; a < kH; ++a)
+          for (int c = 1; c <= kB; ++c)
+            for (int e = 1; e <= kB; ++e)
+              count[cell(a, c, e)] = static_cast<std::uint16_t>(summed[cell(a, c - 1, e)] + summed[cell(a, c, e)] +
+                                                                summed[cell(a, c + 1, e)]);
+        for (int a = 1; a <= kB; ++a)
+          for (int c = 1; c <= kB; ++c)
+            for (int e = 1; e <= kB; ++e)
+              summed[cell(a, c, e)] = static_cast<std::uint16_t>(count[cell(a - 1, c, e)] + count[cell(a, c, e)] +
+                                                                 count[cell(a + 1, c, e)]);
         for (int q = 0; q < kN; ++q) {
           const int a = q / (kB * kB), c = q / kB % kB, e = q % kB;
           const std::size_t centre = cell(a + 1, c + 1, e + 1);
           if (side[centre] == 2) continue;
-          const int inside = count[centre] & 0xff, all = count[centre] >> 8;
+          const int inside = summed[centre] & 0xff, all = summed[centre] >> 8;
           if (side[centre] == 1 ? 2 * inside >= all : 2 * inside <= all) continue;
           std::uint8_t& far = beyond[m * kN + static_cast<std::size_t>(q)];
           if (far == 0) {

@@ -72,6 +72,17 @@ class SparseField {
                           : uniform_[n];
     }
 
+    // The kBrick values of row (i, j) (a grid row within one brick of the centre brick) in the
+    // brick `dk` (-1, 0, 1) bricks from the centre along k, local index k & (kBrick - 1); null
+    // where that brick is uniform, its value then in *uniform.
+    const float* Row(int i, int j, int dk, float* uniform) const {
+      const auto n = static_cast<std::size_t>(
+          (((i >> kBrickLog2) - centre_[0] + 1) * 3 + (j >> kBrickLog2) - centre_[1] + 1) * 3 + dk + 1);
+      *uniform = uniform_[n];
+      const float* v = values_[n];
+      return v != nullptr ? v + ((i & (kBrick - 1)) * kBrick + (j & (kBrick - 1))) * kBrick : nullptr;
+    }
+
    private:
     friend class SparseField;
     std::array<int, 3> centre_{};
