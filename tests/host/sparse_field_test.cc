@@ -260,7 +260,7 @@ TEST(WriteQ16, NodesOutsideStayOutside) {
   }
 }
 
-// A brick's neighbourhood reads every node within one brick of it as Value does: stored bricks,
+// A brick's neighbourhood reads every node within one brick of it, and its rows, as Value does: stored bricks,
 // uniform inside and outside ones, and the grid's last, partial bricks (21 nodes: 8 + 8 + 5).
 TEST(SparseField, NeighbourhoodReadsAsValue) {
   const GridSpec g = Grid(21, 17, 19, 4);
@@ -277,7 +277,7 @@ TEST(SparseField, NeighbourhoodReadsAsValue) {
     for (int n = 0; v != nullptr && n < SparseField::kBrickNodes; ++n)
       v[n] = static_cast<float>((static_cast<int>(b) * 37 + n * 11) % 71) / 10.0f - 3.5f;
   }
-  int checked = 0;
+  int checked = 0, rows = 0;
   for (int bi = 0; bi < bd[0]; ++bi)
     for (int bj = 0; bj < bd[1]; ++bj)
       for (int bk = 0; bk < bd[2]; ++bk) {
@@ -286,7 +286,19 @@ TEST(SparseField, NeighbourhoodReadsAsValue) {
           for (int j = std::max(0, bj * kB - kB); j < std::min(g.dims[1], bj * kB + 2 * kB); ++j)
             for (int k = std::max(0, bk * kB - kB); k < std::min(g.dims[2], bk * kB + 2 * kB); ++k, ++checked)
               ASSERT_EQ(near.Value(i, j, k), f.Value(i, j, k)) << bi << bj << bk << " " << i << " " << j << " " << k;
+        // Rows: node k of the brick dk along k, where the grid has it.
+        for (int i = std::max(0, bi * kB - kB); i < std::min(g.dims[0], bi * kB + 2 * kB); ++i)
+          for (int j = std::max(0, bj * kB - kB); j < std::min(g.dims[1], bj * kB + 2 * kB); ++j)
+            for (int dk = -1; dk <= 1; ++dk)
+              for (int k = (bk + dk) * kB; k < std::min(g.dims[2], (bk + dk + 1) * kB); ++k) {
+                if (k < 0) continue;
+                float uniform = 0.0f;
+                const float* row = near.Row(i, j, dk, &uniform);
+                ASSERT_EQ(row != nullptr ? row[k % kB] : uniform, f.Value(i, j, k)) << i << " " << j << " " << k;
+                ++rows;
+              }
       }
+  EXPECT_GT(rows, checked / 2);
   EXPECT_GT(checked, 27 * 21 * 17 * 19 / 2);
   EXPECT_EQ(f.Value(10, 10, 3), -4.0f);  // a uniform inside brick is read
 }
