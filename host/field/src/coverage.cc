@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <vector>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -18,6 +19,25 @@ namespace {
 using V3 = Eigen::Vector3d;
 
 constexpr double kCoverSpacings = 3.0;
+
+// nanoflann result set: every sample within `radius` (metres) of the query, in `out`.
+class AllWithin {
+ public:
+  AllWithin(double radius, std::vector<std::size_t>& out) : bound_sq_(radius * radius), out_(out) {}
+  void init() {}
+  void clear() {}
+  std::size_t size() const { return out_.size(); }
+  bool full() const { return true; }
+  double worstDist() const { return bound_sq_; }
+  bool addPoint(double dist_sq, std::size_t j) {
+    if (dist_sq <= bound_sq_) out_.push_back(j);
+    return true;
+  }
+
+ private:
+  double bound_sq_;
+  std::vector<std::size_t>& out_;
+};
 
 struct Count {
   std::size_t crossings = 0;
@@ -41,6 +61,14 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
   const Count total = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, bricks, 16), Count{},
       [&](const auto& r, Count c) {
+        // The samples that may lie within min_distance of a crossing of the brick: every crossing
+        // lies in the box of nodes base .. base + kB (edges leave the brick by one step), so within
+        // its half diagonal of the box's centre. Gathered at the brick's first crossing; each
+        // crossing then asks them, not the tree (the same test: AnyWithin on nanoflann's distance).
+        std::vector<std::size_t> candidates;
+        bool gathered = false;
+        V3 centre = V3::Zero();
+        const double reach = out.min_distance_m + 0.5 * kB * std::sqrt(3.0) * h;
         // One crossing test: the edge from node (i, j, k), phi `here`, one step along axis `s`.
         const auto edge = [&](int i, int j, int k, double here, int s, double there) {
           if ((here <= 0.0) == (there <= 0.0)) return;
@@ -48,13 +76,28 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
           const double t = here / (here - there);  // the zero along the edge, in [0, 1]
           V3 p = grid.origin_m + h * V3(i, j, k);
           p[s] += h * t;
+          if (!gathered) {
+            candidates.clear();
+            AllWithin all(reach * (1.0 + 1e-9), candidates);
+            tree.findNeighbors(all, centre.data(), nanoflann::SearchParams());
+            gathered = true;
+          }
           detail::AnyWithin near(out.min_distance_m);
-          tree.findNeighbors(near, p.data(), nanoflann::SearchParams());
+          for (const std::size_t x : candidates) {
+            double d2 = 0.0;  // as nanoflann's L2_Simple_Adaptor sums it
+            for (Eigen::Index d = 0; d < 3; ++d) {
+              const double diff = p[d] - samples[x][d];
+              d2 += diff * diff;
+            }
+            if (!near.addPoint(d2, x)) break;
+          }
           if (!near.found()) ++c.uncovered;
         };
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
           const std::array<int, 3> bc = field.BrickCoords(b);
           const std::array<int, 3> base{bc[0] * kB, bc[1] * kB, bc[2] * kB};
+          gathered = false;
+          centre = grid.origin_m + h * (V3(base[0], base[1], base[2]) + V3::Constant(0.5 * kB));
           const float* values = field.BrickValues(b);
           if (values == nullptr) {
             // Uniform: no edge crosses inside it; across a face, only into a brick that is not
@@ -80,24 +123,22 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
             }
             continue;
           }
-          for (int a = 0; a < kB; ++a)
-            for (int e = 0; e < kB; ++e)
-              for (int f = 0; f < kB; ++f) {
+          // Each node's edges to its +i, +j, +k neighbours in the grid; within the brick straight
+          // from its values, across its upper faces through Value.
+          const int na = std::min(kB, grid.dims[0] - base[0]), ne = std::min(kB, grid.dims[1] - base[1]),
+                    nf = std::min(kB, grid.dims[2] - base[2]);
+          for (int a = 0; a < na; ++a)
+            for (int e = 0; e < ne; ++e)
+              for (int f = 0; f < nf; ++f) {
                 const int i = base[0] + a, j = base[1] + e, k = base[2] + f;
-                if (i >= grid.dims[0] || j >= grid.dims[1] || k >= grid.dims[2]) continue;
-                const double here = values[(a * kB + e) * kB + f];
-                const std::array<int, 3> local{a, e, f};
-                for (int s = 0; s < 3; ++s) {
-                  std::array<int, 3> far{i, j, k};
-                  ++far[static_cast<std::size_t>(s)];
-                  if (far[static_cast<std::size_t>(s)] >= grid.dims[static_cast<std::size_t>(s)]) continue;
-                  std::array<int, 3> near = local;
-                  ++near[static_cast<std::size_t>(s)];
-                  const double there = near[static_cast<std::size_t>(s)] < kB
-                                           ? values[(near[0] * kB + near[1]) * kB + near[2]]
-                                           : field.Value(far[0], far[1], far[2]);
-                  edge(i, j, k, here, s, there);
-                }
+                const int at = (a * kB + e) * kB + f;
+                const double here = values[at];
+                if (i + 1 < grid.dims[0])
+                  edge(i, j, k, here, 0, a + 1 < kB ? values[at + kB * kB] : field.Value(i + 1, j, k));
+                if (j + 1 < grid.dims[1])
+                  edge(i, j, k, here, 1, e + 1 < kB ? values[at + kB] : field.Value(i, j + 1, k));
+                if (k + 1 < grid.dims[2])
+                  edge(i, j, k, here, 2, f + 1 < kB ? values[at + 1] : field.Value(i, j, k + 1));
               }
         }
         return c;
