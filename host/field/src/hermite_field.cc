@@ -1594,6 +1594,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<double> balls(w.size());
     std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
     std::vector<V3> q(w.size());
+    // The nodes read below: the brick's and its faces' halo, not the halo's edges and corners.
+    std::vector<std::size_t> read;
+    for (int a = 0; a < kH; ++a)
+      for (int c = 0; c < kH; ++c)
+        for (int e = 0; e < kH; ++e)
+          if ((a == 0 || a == kH - 1) + (c == 0 || c == kH - 1) + (e == 0 || e == kH - 1) <= 1)
+            read.push_back(static_cast<std::size_t>((a * kH + c) * kH + e));
+    std::vector<V3> read_at(read.size());
+    std::vector<double> read_w(read.size());
     NearestInBox nearest(tree, positions, kClosingBalls);
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
@@ -1604,12 +1613,15 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           for (int e = 0; e < kH; ++e)
             q[static_cast<std::size_t>((a * kH + c) * kH + e)] =
                 node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
-      winding(q, w);
+      for (std::size_t x = 0; x < read.size(); ++x) read_at[x] = q[read[x]];
+      winding(read_at, read_w);
+      for (std::size_t x = 0; x < read.size(); ++x) w[read[x]] = read_w[x];
       // The low halo gives the gradient its w only: no node there is tested for a side, and its
       // balls and thresholds are never read.
       for (int a = 1; a < kH; ++a)
         for (int c = 1; c < kH; ++c)
           for (int e = 1; e < kH; ++e) {
+            if ((a == kH - 1) + (c == kH - 1) + (e == kH - 1) > 1) continue;  // never read
             const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
             const ClosingRule::Balls ball = rule.BallPhi(w[x], q[x], &nearest);
             balls[x] = ball.phi / h;
