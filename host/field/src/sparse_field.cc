@@ -103,9 +103,9 @@ bool RelaxHalo(float* h, const std::array<int, 3>& box, bool& converged) {
     const float mag = std::abs(v);
     float m = mag;
     for (const int o : kHaloStep) {
+      // Branch-free: a NaN (no node) leaves m as it is, as std::min(m, NaN) returns m.
       const float u = h[H(a, b, c) + o];
-      if (std::isnan(u) || (u <= 0.0f) != inside) continue;
-      m = std::min(m, std::abs(u) + step);
+      m = (u <= 0.0f) == inside ? std::min(m, std::abs(u) + step) : m;
     }
     if (m < mag) {
       v = inside ? -m : m;
@@ -603,9 +603,9 @@ SparseField::LipschitzStats SparseField::ProjectLipschitz() {
               // min over neighbours of step / sum = step / (largest sum): division is monotone.
               float largest = 0.0f;
               for (const int o : kHaloStep) {
+                // Branch-free: a NaN (no node) leaves largest, as std::max(largest, NaN) does.
                 const float u = h[static_cast<std::size_t>(H(a, bb, cc) + o)];
-                if (std::isnan(u) || (u <= 0.0f) == inside) continue;
-                largest = std::max(largest, std::abs(v) + std::abs(u));
+                largest = std::max(largest, (u <= 0.0f) != inside ? std::abs(v) + std::abs(u) : 0.0f);
               }
               if (largest > kLipschitzStep) {
                 const float scale = kLipschitzStep / largest;
