@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <tbb/blocked_range.h>
@@ -19,25 +20,6 @@ namespace {
 using V3 = Eigen::Vector3d;
 
 constexpr double kCoverSpacings = 3.0;
-
-// nanoflann result set: every sample within `radius` (metres) of the query, in `out`.
-class AllWithin {
- public:
-  AllWithin(double radius, std::vector<std::size_t>& out) : bound_sq_(radius * radius), out_(out) {}
-  void init() {}
-  void clear() {}
-  std::size_t size() const { return out_.size(); }
-  bool full() const { return true; }
-  double worstDist() const { return bound_sq_; }
-  bool addPoint(double dist_sq, std::size_t j) {
-    if (dist_sq <= bound_sq_) out_.push_back(j);
-    return true;
-  }
-
- private:
-  double bound_sq_;
-  std::vector<std::size_t>& out_;
-};
 
 struct Count {
   std::size_t crossings = 0;
@@ -65,7 +47,7 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
         // lies in the box of nodes base .. base + kB (edges leave the brick by one step), so within
         // its half diagonal of the box's centre. Gathered at the brick's first crossing; each
         // crossing then asks them, not the tree (the same test: AnyWithin on nanoflann's distance).
-        std::vector<std::size_t> candidates;
+        std::vector<std::pair<std::size_t, double>> candidates;  // (sample, squared distance)
         bool gathered = false;
         V3 centre = V3::Zero();
         const double reach = out.min_distance_m + 0.5 * kB * std::sqrt(3.0) * h;
@@ -77,20 +59,15 @@ Coverage MeasureCoverage(const SparseField& field, const std::vector<V3>& sample
           V3 p = grid.origin_m + h * V3(i, j, k);
           p[s] += h * t;
           if (!gathered) {
-            candidates.clear();
-            AllWithin all(reach * (1.0 + 1e-9), candidates);
-            tree.findNeighbors(all, centre.data(), nanoflann::SearchParams());
+            const double radius = reach * (1.0 + 1e-9);
+            tree.radiusSearch(centre.data(), radius * radius, candidates, nanoflann::SearchParams(32, 0.0f, false));
             gathered = true;
           }
           detail::AnyWithin near(out.min_distance_m);
-          for (const std::size_t x : candidates) {
-            double d2 = 0.0;  // as nanoflann's L2_Simple_Adaptor sums it
-            for (Eigen::Index d = 0; d < 3; ++d) {
-              const double diff = p[d] - samples[x][d];
-              d2 += diff * diff;
-            }
-            if (!near.addPoint(d2, x)) break;
-          }
+          // The distance as the tree's own searches sum it (nanoflann's L2_Simple_Adaptor).
+          for (const auto& match : candidates)
+            if (!near.addPoint(tree.distance.evalMetric(p.data(), static_cast<unsigned>(match.first), 3), match.first))
+              break;
           if (!near.found()) ++c.uncovered;
         };
         for (std::size_t b = r.begin(); b != r.end(); ++b) {

@@ -1261,6 +1261,11 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
         const std::array<int, 3> bc = field.BrickCoords(bricks[m]);
         const SparseField::Neighbourhood around = field.Neighbours(bc);
         unsigned seen = 0;
+        const auto set = [&](std::size_t x, std::uint8_t here) {
+          side[x] = here;
+          count[x] = here == 2 ? 0 : here == 1 ? 0x101 : 0x100;
+          seen |= here == 2 ? 0u : 1u << here;
+        };
         const int k0 = bc[2] * kB;                     // the grid's k of the brick's e = 1
         const int k_end = std::min(kB, dims[2] - k0);  // the brick's nodes within the grid
         for (int a = 0; a < kH; ++a) {
@@ -1268,11 +1273,6 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
           for (int c = 0; c < kH; ++c) {
             const int j = bc[1] * kB + c - 1;
             const std::size_t at = cell(a, c, 0);
-            const auto set = [&](std::size_t x, std::uint8_t here) {
-              side[x] = here;
-              count[x] = here == 2 ? 0 : here == 1 ? 0x101 : 0x100;
-              seen |= here == 2 ? 0u : 1u << here;
-            };
             if (i < 0 || j < 0 || i >= dims[0] || j >= dims[1]) {
               for (int e = 0; e < kH; ++e) set(at + static_cast<std::size_t>(e), 2);
               continue;
@@ -1593,7 +1593,6 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // Signed distance to the inner balls (voxels) where w is unclear; +infinity elsewhere.
     std::vector<double> balls(w.size());
     std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
-    std::vector<V3> q(w.size());
     // The nodes read below: the brick's and its faces' halo, not the halo's edges and corners.
     std::vector<std::size_t> read;
     for (int a = 0; a < kH; ++a)
@@ -1608,12 +1607,12 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const std::size_t b = mixed[m];
       const auto [bi, bj, bk] = field.BrickCoords(b);
       nearest.Box(BrickCentre(grid.origin_m, h, {bi, bj, bk}), 0.5 * (kB + 1) * std::sqrt(3.0) * h * (1.0 + 1e-9));
-      for (int a = 0; a < kH; ++a)
-        for (int c = 0; c < kH; ++c)
-          for (int e = 0; e < kH; ++e)
-            q[static_cast<std::size_t>((a * kH + c) * kH + e)] =
-                node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1);
-      for (std::size_t x = 0; x < read.size(); ++x) read_at[x] = q[read[x]];
+      // Node (a, c, e) of the brick and its halo; (1, 1, 1) is the brick's first node.
+      const auto q = [&](int a, int c, int e) { return node_at(bi * kB + a - 1, bj * kB + c - 1, bk * kB + e - 1); };
+      for (std::size_t x = 0; x < read.size(); ++x) {
+        const auto cell = static_cast<int>(read[x]);
+        read_at[x] = q(cell / (kH * kH), cell / kH % kH, cell % kH);
+      }
       winding(read_at, read_w);
       for (std::size_t x = 0; x < read.size(); ++x) w[read[x]] = read_w[x];
       // The low halo gives the gradient its w only: no node there is tested for a side, and its
@@ -1623,7 +1622,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           for (int e = 1; e < kH; ++e) {
             if ((a == kH - 1) + (c == kH - 1) + (e == kH - 1) > 1) continue;  // never read
             const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
-            const ClosingRule::Balls ball = rule.BallPhi(w[x], q[x], &nearest);
+            const ClosingRule::Balls ball = rule.BallPhi(w[x], q(a, c, e), &nearest);
             balls[x] = ball.phi / h;
             threshold[x] = ball.threshold;
           }
