@@ -1105,6 +1105,33 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
       }
   EXPECT_EQ(differ, 0u);
   EXPECT_EQ(differ_reused, 0u);
+
+  // The rules are matched by the samples' values, not by the vectors' addresses: equal copies
+  // reuse them; the same vectors with one sample moved (or a new set at a freed vector's address)
+  // do not, and build what the same call without the rules builds (the packing, which the caller
+  // vouches for, reused in both).
+  const std::vector<Eigen::Vector3d> p_copy = p, unit_copy = unit;
+  HermiteStats copied;
+  const SparseField from_copies = HermiteField(g, p_copy, unit_copy, r_max, again, &copied);
+  EXPECT_TRUE(copied.side_rules_reused);
+  p.front().z() += 2.0 * g.voxel_m;
+  HermiteStats packing_only = first;
+  packing_only.side_rules = nullptr;
+  HermiteOptions without_rules;
+  without_rules.packed = &packing_only;
+  HermiteStats moved, moved_fresh;
+  const SparseField from_moved = HermiteField(g, p, unit, r_max, again, &moved);
+  const SparseField moved_direct = HermiteField(g, p, unit, r_max, without_rules, &moved_fresh);
+  EXPECT_FALSE(moved.side_rules_reused);
+  std::size_t differ_copies = 0, differ_moved = 0;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) {
+        differ_copies += from_copies.Value(i, j, k) != direct.Value(i, j, k) ? 1u : 0u;
+        differ_moved += from_moved.Value(i, j, k) != moved_direct.Value(i, j, k) ? 1u : 0u;
+      }
+  EXPECT_EQ(differ_copies, 0u);
+  EXPECT_EQ(differ_moved, 0u);
 }
 
 // Issue 20: a post cut flat and scanned without its bottom (a wrist, a hub, a part's foot: a

@@ -2090,35 +2090,38 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
 }  // namespace
 
 // HermiteStats::side_rules: the side rules with what they refer to, owned together so that a later
-// call can use them (the rules hold references to the tree, spacing and packing).
+// call can use them (the rules hold references to the samples, tree, spacing and packing). The
+// samples are copies: a later call is matched by their values, never by the caller's vectors'
+// addresses (a vector freed and another made at its address would have matched, and the rules
+// then read freed memory).
 struct HermiteSideRules {
   HermiteSideRules(const std::vector<V3>& positions_in, const std::vector<V3>& normals_in,
                    const std::vector<double>& spacing_in, const Packing& inner_in,
                    const std::vector<V3>& guard_positions, double voxel, bool hull_cut_in)
-      : positions(&positions_in),
-        normals(&normals_in),
+      : positions(positions_in),
+        normals(normals_in),
         voxel_m(voxel),
         hull_cut(hull_cut_in),
-        guards(guard_positions.size()),
+        guards(guard_positions),
         spacing(spacing_in),
         inner(inner_in),
-        cloud{&positions_in},
+        cloud{&positions},
         tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10)),
-        sides(tree, positions_in, normals_in, guard_positions, spacing, inner, voxel, hull_cut_in) {}
+        sides(tree, positions, normals, guards, spacing, inner, voxel, hull_cut_in) {}
   HermiteSideRules(const HermiteSideRules&) = delete;
   HermiteSideRules& operator=(const HermiteSideRules&) = delete;
-  // Made from these samples (the same vectors), voxel and options.
+  // Made from samples, guards, voxel and options equal to these (O(n) comparisons).
   bool Fits(const std::vector<V3>& positions_in, const std::vector<V3>& normals_in, double voxel, bool hull_cut_in,
-            std::size_t guards_in) const {
-    return positions == &positions_in && normals == &normals_in && voxel_m == voxel && hull_cut == hull_cut_in &&
+            const std::vector<V3>& guards_in) const {
+    return voxel_m == voxel && hull_cut == hull_cut_in && positions == positions_in && normals == normals_in &&
            guards == guards_in;
   }
 
-  const std::vector<V3>* positions;
-  const std::vector<V3>* normals;
+  const std::vector<V3> positions;
+  const std::vector<V3> normals;
   double voxel_m;
   bool hull_cut;
-  std::size_t guards;
+  const std::vector<V3> guards;  // the unit-normal guards' positions (only the hull reads them)
   const std::vector<double> spacing;
   const Packing inner;
   const PointCloud cloud;
@@ -2151,7 +2154,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   // tree and rules, not made again.
   const std::shared_ptr<const HermiteSideRules> reuse =
       options.winding_labels && options.packed != nullptr && options.packed->side_rules != nullptr &&
-              options.packed->side_rules->Fits(positions, normals, h, options.hull_cut, guard_positions.size())
+              options.packed->side_rules->Fits(positions, normals, h, options.hull_cut, guard_positions)
           ? options.packed->side_rules
           : nullptr;
   st.side_rules_reused = reuse != nullptr;

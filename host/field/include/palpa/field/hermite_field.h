@@ -98,8 +98,8 @@ struct HermiteOptions {
   // The guarded packings (inner, outer and their shrink counts) of an earlier HermiteField on the
   // same samples, normals, r_max, leak_guard and voxel, to use instead of packing again: they do not
   // depend on the grid's extent (a grid grown to hold an open scan's closure). nullptr: pack. Its
-  // side_rules too, when set and made from the same positions and normals vectors (the same
-  // objects), voxel, hull_cut and guards.
+  // side_rules too, when set and made from equal positions, normals, guards (compared by value;
+  // the rules hold their own copies), voxel and hull_cut.
   const HermiteStats* packed = nullptr;
   // Samples dropped as outliers (palpa build: FindWindingOutliers), metres, with their outward
   // normals (any length > 0): no patch, no balls, no share of the winding number, but each one's
