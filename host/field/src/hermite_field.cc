@@ -23,6 +23,7 @@
 #include <nanoflann.hpp>
 
 #include "palpa/field/box_nearest.h"
+#include "palpa/field/convex_hull.h"
 #include "palpa/field/winding.h"
 #include "point_cloud.h"
 
@@ -969,21 +970,6 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
   return {.closed = !open_side || flux.norm() < kSureClosedFlux * area, .open_side = open_side, .area = area};
 }
 
-// How far p lies outside a convex hull given as its faces' planes (n, d) with n outward and unit:
-// the largest n.p + d, a lower bound on the distance (exact where the nearest point of the hull is
-// on a face), 1-Lipschitz; -infinity without planes (a flat or degenerate set has no inside).
-double HullDistance(const std::vector<Eigen::Vector4d>& planes, const V3& p) {
-  double out = -std::numeric_limits<double>::infinity();
-  for (const Eigen::Vector4d& f : planes) out = std::max(out, f.head<3>().dot(p) + f[3]);
-  return out;
-}
-
-// HullDistance(planes, p) > limit, stopping at the first plane past it.
-bool BeyondHull(const std::vector<Eigen::Vector4d>& planes, const V3& p, double limit) {
-  return std::any_of(planes.begin(), planes.end(),
-                     [&](const Eigen::Vector4d& f) { return f.head<3>().dot(p) + f[3] > limit; });
-}
-
 // The closing rule of an open side (issue 20): inside where the samples' winding number w >= 1/2,
 // or where w is unclear and the point lies within the inner ball of one of the kClosingBalls
 // samples nearest it that continues the surface towards it (Continues), or where none of those
@@ -998,7 +984,7 @@ class ClosingRule {
   // kContinueDegrees nearest-sample queries per sample, one more at the antipode where those pass).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
               const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing,
-              const std::vector<Eigen::Vector4d>& hull, double hull_beyond)
+              const ConvexHull& hull, double hull_beyond)
       : tree_(tree),
         inner_(inner),
         rim_(rim),
@@ -1093,13 +1079,14 @@ class ClosingRule {
     const double threshold = beyond_rim() ? kRimClosingWinding : kBallClosingWinding;
     if (w < threshold) return {};
     double best = std::numeric_limits<double>::infinity();
+    HullSide hull_side;
     for (std::size_t m = 0; m < got; ++m) {
       const std::size_t i = idx[m];
       const double phi = (p - inner_.centres[i]).norm() - inner_.radii[i];
-      if (phi < best && (phi >= 0.0 || Continues(i, p))) best = phi;
+      if (phi < best && (phi >= 0.0 || Continues(i, p, hull_side))) best = phi;
     }
     if (!(best < 0.0) && far_tree_) {  // every medial ball that holds p (kClosingBalls)
-      DeepestContinuing deepest(*this, p, largest_radius_);
+      DeepestContinuing deepest(*this, p, largest_radius_, hull_side);
       far_tree_->findNeighbors(deepest, p.data(), nanoflann::SearchParams());
       best = std::min(best, deepest.phi());
     }
@@ -1110,10 +1097,15 @@ class ClosingRule {
   }
 
  private:
+  // Whether p lies beyond hull_beyond_ of the samples' hull, asked once per point: every ball
+  // holding p may ask it (a sphere's: all of them), and a hull may have tens of thousands of faces.
+  struct HullSide {
+    int beyond = -1;  // -1 not yet asked
+  };
   // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
   // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
-  // sample, in kBehindSectors sectors.
-  bool Continues(std::size_t i, const V3& p) const {
+  // sample, in kBehindSectors sectors (or, a medial ball's, within hull_beyond_ of the hull).
+  bool Continues(std::size_t i, const V3& p, HullSide& side) const {
     const std::uint8_t mask = sectors_[i];
     // No sector, or all: the same answer for any p (medial balls have a sector).
     static_assert(kBehindSectors <= kContinueSectors && kContinueSectors <= 8);
@@ -1122,9 +1114,12 @@ class ClosingRule {
     const V3& n = normals_[i];
     const V3 d = p - positions_[i];
     const V3 t = d - d.dot(n) * n;
-    if (t.norm() < kBehindShare * d.norm())
-      return std::popcount(mask) >= kBehindSectors ||
-             (medial_[i] != 0 && !hull_.empty() && !BeyondHull(hull_, p, hull_beyond_));
+    if (t.norm() < kBehindShare * d.norm()) {
+      if (std::popcount(mask) >= kBehindSectors) return true;
+      if (medial_[i] == 0 || hull_.empty()) return false;
+      if (side.beyond < 0) side.beyond = hull_.Beyond(p, hull_beyond_) ? 1 : 0;
+      return side.beyond == 0;
+    }
     const auto& [e1, e2] = frames_[i];
     const double sector = std::atan2(-t.dot(e2), -t.dot(e1)) / (2.0 * std::numbers::pi / kContinueSectors);
     const int k = static_cast<int>(((std::lround(sector) % kContinueSectors) + kContinueSectors) % kContinueSectors);
@@ -1135,8 +1130,8 @@ class ClosingRule {
   // ball that holds p and continues the surface towards it (the minimum, in any visiting order).
   class DeepestContinuing {
    public:
-    DeepestContinuing(const ClosingRule& rule, const V3& p, double radius)
-        : rule_(rule), p_(p), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+    DeepestContinuing(const ClosingRule& rule, const V3& p, double radius, HullSide& side)
+        : rule_(rule), p_(p), side_(side), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
     void init() {}
     void clear() {}
     std::size_t size() const { return phi_ < 0.0 ? 1 : 0; }
@@ -1145,7 +1140,7 @@ class ClosingRule {
     bool addPoint(double dist_sq, std::size_t m) {
       const std::size_t i = rule_.far_balls_[m];
       const double phi = std::sqrt(dist_sq) - rule_.inner_.radii[i];
-      if (phi < std::min(phi_, 0.0) && rule_.Continues(i, p_)) phi_ = phi;
+      if (phi < std::min(phi_, 0.0) && rule_.Continues(i, p_, side_)) phi_ = phi;
       return true;
     }
     double phi() const { return phi_; }
@@ -1153,6 +1148,7 @@ class ClosingRule {
    private:
     const ClosingRule& rule_;
     const V3& p_;
+    HullSide& side_;
     double bound_sq_;
     double phi_ = std::numeric_limits<double>::infinity();
   };
@@ -1161,7 +1157,7 @@ class ClosingRule {
   const std::vector<std::uint8_t>& rim_;
   const std::vector<V3>& positions_;
   const std::vector<V3>& normals_;
-  const std::vector<Eigen::Vector4d>& hull_;  // the samples' convex hull (may be empty)
+  const ConvexHull& hull_;  // the samples' convex hull (may be empty)
   double hull_beyond_;
   std::vector<std::uint8_t> sectors_;      // bit k: the ball lies on the surface in sector k (Continues)
   std::vector<std::uint8_t> medial_;       // 1: the ball's antipode lies on the surface, facing away
@@ -1365,15 +1361,14 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
 // one brick is dropped before g is evaluated when it holds no inside node (a dense lattice of g
 // at the brick corners, filled over every block reaching past `beyond`, cost 2.5-4 x as much at
 // 1,200 cells).
-std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const std::vector<Eigen::Vector4d>& hull,
-                                double beyond) {
+std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const ConvexHull& hull, double beyond) {
   if (hull.empty()) return 0;
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
   constexpr int kB = SparseField::kBrick;
   constexpr int kBlock = 8;  // bricks per edge of the boxes first tested, spread over the threads
-  const auto g = [&](const V3& p) { return HullDistance(hull, p); };
+  const auto g = [&](const V3& p) { return hull.Distance(p); };
   // A cube of nodes from `lo`, `size` (a power of 2) on each axis, clipped to the grid; the first
   // ones are aligned blocks of bricks, so a cube of at most kB nodes lies in one brick.
   struct Box {
@@ -1484,10 +1479,13 @@ struct SideRules {
         // and an open set's inside, where w is unclear and no ball holds it, is w's to decide (the
         // far pass's carry rule).
         hull([&] {
-          if (!hull_cut) return std::vector<Eigen::Vector4d>{};
+          if (!hull_cut) return ConvexHull{};
           std::vector<V3> hull_points = positions;
           hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-          return detail::ConvexHullPlanes(hull_points);
+          V3 centroid = V3::Zero();
+          for (const V3& q : hull_points) centroid += q;
+          centroid /= static_cast<double>(std::max<std::size_t>(1, hull_points.size()));
+          return ConvexHull(detail::ConvexHullPlanes(hull_points), centroid);
         }()),
         hull_beyond(std::max(kHullVoxels * voxel_m, kHullSpacings * median_spacing)),
         rule(tree, inner, rim, positions, normals, spacing, hull, hull_beyond) {}
@@ -1498,7 +1496,7 @@ struct SideRules {
   const WindingNumber winding;
   const std::vector<std::uint8_t> rim;  // RimSamples
   const double median_spacing;          // metres
-  const std::vector<Eigen::Vector4d> hull;
+  const ConvexHull hull;
   const double hull_beyond;  // metres
   const ClosingRule rule;
 };
@@ -1534,7 +1532,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const auto node_at = [&](double i, double j, double k) { return V3(grid.origin_m + h * V3(i, j, k)); };
   const std::vector<std::uint8_t>& rim = sides.rim;
   const double median_spacing = sides.median_spacing;
-  const std::vector<Eigen::Vector4d>& hull = sides.hull;
+  const ConvexHull& hull = sides.hull;
   const double hull_beyond = sides.hull_beyond;
   const ClosingRule& rule = sides.rule;
   std::vector<float> corner_w(cd[0] * cd[1] * cd[2]);
@@ -1736,7 +1734,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // with 500 samples, Cli.SparseClosedSetsAreNotCalledOpenScans).
   const auto open_face_cut = [&](int i, int j, int k, const V3& p, double w) {
     return w >= kOpenFaceWinding && grid.OnFace(i, j, k) && !capped(i, j, k, p) &&
-           (closed_set || !BeyondHull(hull, p, hull_beyond));
+           (closed_set || !hull.Beyond(p, hull_beyond));
   };
   // The far pass's filter passes a node held inside whose interpolated w is under this: 1/2, and
   // on a closed set kDiscPointMax (the disc rule examines it).
@@ -1894,7 +1892,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const V3 centre = BrickCentre(grid.origin_m, h, {bi, bj, bk});
       const double half_diagonal = 0.5 * (kB - 1) * std::sqrt(3.0) * h;
       nearest.Box(centre, half_diagonal * (1.0 + 1e-9));
-      // Whether a node of the brick lies beyond hull_beyond of the samples' hull. HullDistance is
+      // Whether a node of the brick lies beyond hull_beyond of the samples' hull. ConvexHull::Distance is
       // 1-Lipschitz: with the brick's centre within hull_beyond less its half diagonal (and a
       // rounding slack), no node is, and the planes need not be scanned node by node (the far
       // pass's carry rule asked for 250,000 nodes of fin90, each scanning every plane).
@@ -1902,10 +1900,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const auto beyond_hull = [&](const V3& p) {
         if (within_hull < 0)
           within_hull =
-              HullDistance(hull, centre) + half_diagonal + 1e-9 * (1.0 + centre.norm() + half_diagonal) <= hull_beyond
-                  ? 1
-                  : 0;
-        return within_hull == 0 && BeyondHull(hull, p, hull_beyond);
+              hull.Distance(centre) + half_diagonal + 1e-9 * (1.0 + centre.norm() + half_diagonal) <= hull_beyond ? 1
+                                                                                                                  : 0;
+        return within_hull == 0 && hull.Beyond(p, hull_beyond);
       };
       float* values = field.BrickValues(b);
       node.clear();
