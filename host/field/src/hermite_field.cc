@@ -1057,12 +1057,17 @@ class ClosingRule {
   // positions whose box holds p, up to kClosingBalls or more): the same samples (a tie at the
   // k-th distance broken by index), from one search per brick (the oni: the tree's searches here
   // were a fifth of its build).
-  Balls BallPhi(double w, const V3& p, NearestInBox* box = nullptr) const {
-    return w >= 0.5 ? Balls{} : BallsAt(w, p, box);
+  // `stop_below` (metres): once a ball gives phi below it, that phi is returned, not the deepest
+  // (the callers clamp a value to the band, or read only its sign: the same answer, and a node
+  // deep within a sphere's balls no longer visits every one of them; CGAL's radar.xyz).
+  Balls BallPhi(double w, const V3& p, NearestInBox* box = nullptr,
+                double stop_below = -std::numeric_limits<double>::infinity()) const {
+    return w >= 0.5 ? Balls{} : BallsAt(w, p, box, stop_below);
   }
   // BallPhi at w >= 1/2 as well (down to kRimClosingWinding): for the far pass, where the local
   // estimate holds a node outside on an open side and w leans inside but is unclear.
-  Balls BallsAt(double w, const V3& p, NearestInBox* box = nullptr) const {
+  Balls BallsAt(double w, const V3& p, NearestInBox* box = nullptr,
+                double stop_below = -std::numeric_limits<double>::infinity()) const {
     if (w < kRimClosingWinding) return {};
     std::array<std::size_t, kClosingBalls> idx{};
     std::array<double, kClosingBalls> d2{};
@@ -1084,16 +1089,17 @@ class ClosingRule {
       const std::size_t i = idx[m];
       const double phi = (p - inner_.centres[i]).norm() - inner_.radii[i];
       if (phi < best && (phi >= 0.0 || Continues(i, p, hull_side))) best = phi;
+      if (best < stop_below) return {best, threshold};
     }
     if (!(best < 0.0) && far_tree_) {  // every medial ball that holds p (kClosingBalls)
-      DeepestContinuing deepest(*this, p, largest_radius_, hull_side);
+      DeepestContinuing deepest(*this, p, largest_radius_, stop_below, hull_side);
       far_tree_->findNeighbors(deepest, p.data(), nanoflann::SearchParams());
       best = std::min(best, deepest.phi());
     }
     return {best, threshold};
   }
   bool Inside(double w, const V3& p, NearestInBox* box = nullptr) const {
-    return w >= 0.5 || BallPhi(w, p, box).phi < 0.0;
+    return w >= 0.5 || BallPhi(w, p, box, 0.0).phi < 0.0;
   }
 
  private:
@@ -1127,11 +1133,12 @@ class ClosingRule {
   }
 
   // nanoflann result set over the medial balls' centres within the largest radius: the deepest
-  // ball that holds p and continues the surface towards it (the minimum, in any visiting order).
+  // ball that holds p and continues the surface towards it (the minimum, in any visiting order),
+  // or the first found below `stop_below` (the search then ends).
   class DeepestContinuing {
    public:
-    DeepestContinuing(const ClosingRule& rule, const V3& p, double radius, HullSide& side)
-        : rule_(rule), p_(p), side_(side), bound_sq_(radius * radius * (1.0 + 1e-9)) {}
+    DeepestContinuing(const ClosingRule& rule, const V3& p, double radius, double stop_below, HullSide& side)
+        : rule_(rule), p_(p), side_(side), bound_sq_(radius * radius * (1.0 + 1e-9)), stop_below_(stop_below) {}
     void init() {}
     void clear() {}
     std::size_t size() const { return phi_ < 0.0 ? 1 : 0; }
@@ -1141,7 +1148,7 @@ class ClosingRule {
       const std::size_t i = rule_.far_balls_[m];
       const double phi = std::sqrt(dist_sq) - rule_.inner_.radii[i];
       if (phi < std::min(phi_, 0.0) && rule_.Continues(i, p_, side_)) phi_ = phi;
-      return true;
+      return !(phi_ < stop_below_);
     }
     double phi() const { return phi_; }
 
@@ -1150,6 +1157,7 @@ class ClosingRule {
     const V3& p_;
     HullSide& side_;
     double bound_sq_;
+    double stop_below_;
     double phi_ = std::numeric_limits<double>::infinity();
   };
   const KdTree& tree_;
@@ -1523,6 +1531,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
+  // A ball's phi (metres) below this is a band's depth wherever it is used: the balls' search may
+  // stop there (ClosingRule::BallPhi's stop_below).
+  const double clamped_below = -static_cast<double>(band) * h * (1.0 + 1e-9);
   constexpr int kB = SparseField::kBrick;
   const std::vector<double>& areas = sides.areas;
   const WindingNumber& winding = sides.winding;
@@ -1620,7 +1631,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           for (int e = 1; e < kH; ++e) {
             if ((a == kH - 1) + (c == kH - 1) + (e == kH - 1) > 1) continue;  // never read
             const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
-            const ClosingRule::Balls ball = rule.BallPhi(w[x], q(a, c, e), &nearest);
+            const ClosingRule::Balls ball = rule.BallPhi(w[x], q(a, c, e), &nearest, clamped_below);
             balls[x] = ball.phi / h;
             threshold[x] = ball.threshold;
           }
@@ -1974,7 +1985,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         // (the spool's open scan: 7,838 hole nodes under its hub, w 0.50-0.56, a medial ball
         // holding them; 6,569 with the balls asked there too, Poisson's far-wrong total 9,663).
         if (!closed_set && x > 0.0f && w < 0.5 + kWindingClear) {
-          if (const double phi = rule.BallsAt(w, p, &nearest).phi; phi < 0.0) {
+          if (const double phi = rule.BallsAt(w, p, &nearest, clamped_below).phi; phi < 0.0) {
             x = -std::min(band, std::max(1e-6f, static_cast<float>(-phi / h)));
             ++local;
             continue;
