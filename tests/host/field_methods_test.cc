@@ -1438,5 +1438,71 @@ TEST(Winding, GridFaceNodesEndHalfAVoxelOutside) {
   }
 }
 
+// The leak guard (GuardPacking) against its definition run brute force: every ball, from its
+// packed radius r0, is shrunk by the discs of the samples in index order whose plane it pokes
+// through by more than the tolerance and whose centre lies within r0 plus the largest disc of
+// the ball's centre (the tree's search), each test with the radius shrunk so far. On a sphere of
+// scattered samples with noisy normals, inner and outer balls: most outer balls cross a quarter
+// of the samples' planes or more (the marks that order them, not a sort), and on a small set (a
+// sort). The same radii, bit for bit.
+TEST(GuardPacking, ShrinksAsTheBruteForceInIndexOrder) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (const std::size_t n : {3000u, 40u}) {
+    std::vector<Eigen::Vector3d> p, outward;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d u = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+      p.push_back(0.03 * u);
+      outward.push_back((u + 0.03 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng))).normalized());
+    }
+    const std::vector<double> spacing = SampleSpacing(p);
+    const double tolerance = 1e-4;
+    for (const bool outer : {false, true}) {
+      // Outer balls with discs of 20 spacings: each search reaches every sample (a sparse part's
+      // wide discs do so on CGAL's radar.xyz).
+      const double discs = outer ? 20.0 : 1.5;
+      const double max_disc = discs * *std::max_element(spacing.begin(), spacing.end());
+      std::vector<Eigen::Vector3d> nrm = outward;
+      if (outer)
+        for (Eigen::Vector3d& v : nrm) v = -v;
+      const Packing packed = PackSpheres(p, nrm, 0.06);
+      Packing guarded = packed;
+      const std::size_t shrunk = GuardPacking(guarded, p, nrm, spacing, discs, tolerance);
+      std::size_t brute_shrunk = 0, many = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double r0 = packed.radii[i];
+        const Eigen::Vector3d c0 = p[i] - r0 * nrm[i];
+        double r = r0;
+        std::size_t crossed = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+          if (j == i || !((c0 - p[j]).squaredNorm() < (r0 + max_disc) * (r0 + max_disc)) ||
+              !(nrm[j].dot(c0 - p[j]) + r0 > tolerance))
+            continue;
+          ++crossed;
+          const double height = nrm[j].dot(p[i] - p[j]);
+          if (height > 0.0) continue;
+          const double cos_ij = nrm[j].dot(nrm[i]);
+          if (cos_ij > 1.0 - 1e-9) continue;
+          const Eigen::Vector3d c = p[i] - r * nrm[i];
+          if (nrm[j].dot(c - p[j]) + r <= tolerance) continue;
+          const Eigen::Vector3d tip = c + r * nrm[j];
+          const Eigen::Vector3d lateral = (tip - p[j]) - nrm[j].dot(tip - p[j]) * nrm[j];
+          if (lateral.norm() > discs * spacing[j]) continue;
+          r = std::min(r, std::max((tolerance - height) / (1.0 - cos_ij), 0.0));
+        }
+        many += crossed > n / 4 ? 1u : 0u;
+        brute_shrunk += r < r0 ? 1u : 0u;
+        ASSERT_EQ(guarded.radii[i], r) << n << " samples, outer " << outer << ", ball " << i;
+      }
+      EXPECT_EQ(shrunk, brute_shrunk);
+      if (!outer) {
+        EXPECT_GT(brute_shrunk, n / 50);  // the guard does shrink: noisy normals' inner balls
+      } else if (n > 1000) {
+        EXPECT_GT(many, n / 2);  // most outer balls cross a quarter of the planes or more
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace palpa::field

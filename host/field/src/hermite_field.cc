@@ -24,6 +24,7 @@
 
 #include "palpa/field/box_nearest.h"
 #include "palpa/field/convex_hull.h"
+#include "palpa/field/index_order.h"
 #include "palpa/field/winding.h"
 #include "point_cloud.h"
 
@@ -793,6 +794,7 @@ std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, con
   const double max_disc = disc_spacings * *std::max_element(spacing.begin(), spacing.end());
   std::vector<double> radii(n);
   tbb::enumerable_thread_specific<std::vector<std::size_t>> crossing_tls;
+  tbb::enumerable_thread_specific<std::vector<std::uint64_t>> marks_tls;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const V3& p = positions[i];
@@ -809,7 +811,7 @@ std::size_t GuardPacking(Packing& packing, const std::vector<V3>& positions, con
       crossing.clear();
       CrossingResult result(search * search, i, centre, r, tolerance, positions, ball_normals, crossing);
       tree.findNeighbors(result, centre.data(), nanoflann::SearchParams());
-      std::sort(crossing.begin(), crossing.end());
+      SortDistinctIndices(crossing, marks_tls.local());
       for (const std::size_t j : crossing) {
         const V3& nj = ball_normals[j];
         const V3& pj = positions[j];
