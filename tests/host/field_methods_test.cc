@@ -1048,6 +1048,21 @@ TEST(Winding, OpenScanGrowsTheGridToHoldItsRoundClosure) {
   const auto [wrong, face_inside] = wrong_and_faces(*built);
   EXPECT_EQ(face_inside, 0u);
   EXPECT_EQ(wrong, 0u);
+  // Every node more than a band and 2 voxels inside the sphere, the closure's included, is a whole
+  // band deep (the values clamp there): the closure is solid, not a shell.
+  std::size_t deep = 0, deep_closure = 0, shallow = 0;
+  for (int i = 0; i < g.dims[0]; ++i)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int k = 0; k < g.dims[2]; ++k) {
+        const Eigen::Vector3d x = g.Node(i, j, k);
+        if ((x.norm() - r) / g.voxel_m > -(g.band_voxels + 2.0)) continue;
+        ++deep;
+        deep_closure += x.z() < -0.17 * r ? 1u : 0u;
+        shallow += built->field.Value(i, j, k) > -static_cast<float>(g.band_voxels) ? 1u : 0u;
+      }
+  EXPECT_GT(deep_closure, 10000u);
+  EXPECT_EQ(shallow, 0u) << "of " << deep;
+
   // The reported area counts the closing surface in the bricks no sample reaches (here sparse
   // samples reach most of the cap): a lower bound of the cap's 2 pi r (0.83 r).
   const double cap = 2.0 * std::numbers::pi * r * 0.83 * r;

@@ -35,8 +35,9 @@ int Cell(const Eigen::Vector3d& n, int k) {
 
 ConvexHull::ConvexHull(std::vector<Eigen::Vector4d> planes, const Eigen::Vector3d& centre)
     : planes_(std::move(planes)), centre_(centre) {
-  scale_ = centre_.norm();
-  for (const Eigen::Vector4d& f : planes_) scale_ = std::max(scale_, std::abs(f[3]) + centre_.norm());
+  double offset = 0.0;
+  for (const Eigen::Vector4d& f : planes_) offset = std::max(offset, std::abs(f[3]));
+  scale_ = centre_.norm() + offset;
   if (planes_.size() < kScanFaces) return;
   const int k =
       std::clamp(static_cast<int>(std::lround(std::sqrt(static_cast<double>(planes_.size()) / 96.0))), 1, kMaxCells);

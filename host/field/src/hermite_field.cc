@@ -1492,10 +1492,7 @@ struct SideRules {
           if (!hull_cut) return ConvexHull{};
           std::vector<V3> hull_points = positions;
           hull_points.insert(hull_points.end(), guard_positions.begin(), guard_positions.end());
-          V3 centroid = V3::Zero();
-          for (const V3& q : hull_points) centroid += q;
-          centroid /= static_cast<double>(std::max<std::size_t>(1, hull_points.size()));
-          return ConvexHull(detail::ConvexHullPlanes(hull_points), centroid);
+          return detail::ConvexHullOf(hull_points);
         }()),
         hull_beyond(std::max(kHullVoxels * voxel_m, kHullSpacings * median_spacing)),
         rule(tree, inner, rim, positions, normals, spacing, hull, hull_beyond) {}

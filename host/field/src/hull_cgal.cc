@@ -6,13 +6,15 @@
 
 #include <Eigen/Geometry>
 #include <array>
+#include <utility>
 #include <vector>
 
+#include "palpa/field/convex_hull.h"
 #include "point_cloud.h"
 
 namespace palpa::field::detail {
 
-std::vector<Eigen::Vector4d> ConvexHullPlanes(const std::vector<Eigen::Vector3d>& points) {
+ConvexHull ConvexHullOf(const std::vector<Eigen::Vector3d>& points) {
   using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Point = Kernel::Point_3;
   if (points.size() < 4) return {};
@@ -50,7 +52,7 @@ std::vector<Eigen::Vector4d> ConvexHullPlanes(const std::vector<Eigen::Vector3d>
     if (!(n.dot(centroid) + d < -margin)) return {};
     planes.emplace_back(n.x(), n.y(), n.z(), d);
   }
-  return planes;
+  return ConvexHull(std::move(planes), centroid);
 }
 
 }  // namespace palpa::field::detail

@@ -20,6 +20,8 @@
 
 #include <nanoflann.hpp>
 
+#include "palpa/field/convex_hull.h"
+
 namespace palpa::field::detail {
 
 struct PointCloud {
@@ -121,9 +123,10 @@ TangentGap WidestTangentGap(const std::vector<Eigen::Vector3d>& positions, const
 void JetNormalLines(const std::vector<Eigen::Vector3d>& positions, int neighbours,
                     std::vector<Eigen::Vector3d>& normals);
 
-// The outward planes (unit normal, offset: n . p + d > 0 outside) of the convex hull of `points`
-// (CGAL's convex_hull_3, hull_cgal.cc); empty for fewer than 4 points or a flat set.
-std::vector<Eigen::Vector4d> ConvexHullPlanes(const std::vector<Eigen::Vector3d>& points);
+// The convex hull of `points` as its outward face planes (unit normal, offset: n . p + d > 0
+// outside), its bounds taken about the points' centroid (CGAL's convex_hull_3, hull_cgal.cc); no
+// faces for fewer than 4 points or a flat set.
+ConvexHull ConvexHullOf(const std::vector<Eigen::Vector3d>& points);
 
 // EachBehindTheOther's `min_sin` for the flat-pair test (orientation.cc) and the stray test
 // (samples.cc): sin(2 degrees), so that neighbours on one flat sheet, noise aside, are not a wall.
