@@ -1113,7 +1113,9 @@ class ClosingRule {
   // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
   // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
   // sample, in kBehindSectors sectors (or, a medial ball's, within hull_beyond_ of the hull).
-  bool Continues(std::size_t i, const V3& p, HullSide& side) const {
+  // Inlined: asked for every ball a node reaches; left to the compiler, the call with the hull's
+  // memo cost fin90's build 1.2 % more instructions (callgrind, one thread).
+  [[gnu::always_inline]] bool Continues(std::size_t i, const V3& p, HullSide& side) const {
     const std::uint8_t mask = sectors_[i];
     // No sector, or all: the same answer for any p (medial balls have a sector).
     static_assert(kBehindSectors <= kContinueSectors && kContinueSectors <= 8);
