@@ -1597,19 +1597,19 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   for (const std::size_t b : mixed) field.Allocate(b);
   st.winding_bricks = mixed.size();
   std::vector<std::size_t> crossings(mixed.size(), 0);  // grid edges crossing the closing surface, per brick
+  constexpr int kH = kB + 2;                            // one node of halo on each side, for the gradient
+  // The nodes read below: the brick's and its faces' halo, not the halo's edges and corners.
+  std::vector<std::size_t> read;
+  for (int a = 0; a < kH; ++a)
+    for (int c = 0; c < kH; ++c)
+      for (int e = 0; e < kH; ++e)
+        if ((a == 0 || a == kH - 1) + (c == 0 || c == kH - 1) + (e == 0 || e == kH - 1) <= 1)
+          read.push_back(static_cast<std::size_t>((a * kH + c) * kH + e));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mixed.size(), 1), [&](const auto& r) {
-    constexpr int kH = kB + 2;  // one node of halo on each side, for the gradient
     std::vector<double> w(static_cast<std::size_t>(kH * kH * kH));
     // Signed distance to the inner balls (voxels) where w is unclear; +infinity elsewhere.
     std::vector<double> balls(w.size());
     std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
-    // The nodes read below: the brick's and its faces' halo, not the halo's edges and corners.
-    std::vector<std::size_t> read;
-    for (int a = 0; a < kH; ++a)
-      for (int c = 0; c < kH; ++c)
-        for (int e = 0; e < kH; ++e)
-          if ((a == 0 || a == kH - 1) + (c == 0 || c == kH - 1) + (e == 0 || e == kH - 1) <= 1)
-            read.push_back(static_cast<std::size_t>((a * kH + c) * kH + e));
     std::vector<V3> read_at(read.size());
     std::vector<double> read_w(read.size());
     NearestInBox nearest(tree, positions, kClosingBalls);
