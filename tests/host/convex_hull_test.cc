@@ -1,7 +1,7 @@
 // ConvexHull (palpa/field/convex_hull.h) against the scan over every face: Distance bit for bit and
 // Beyond at limits set exactly at, just under and around the scan's value, on polytopes of 40 to
 // 40,000 faces (an ellipsoid's support planes), at points inside, outside and on the faces, and
-// with the bounds taken about a centre inside or outside.
+// with the bounds taken about a centre inside or outside; a ball's side never contradicting Beyond.
 #include "palpa/field/convex_hull.h"
 
 #include <gtest/gtest.h>
@@ -65,6 +65,55 @@ TEST(ConvexHull, DistanceAndBeyondAreTheScans) {
       EXPECT_LT(outside, 2500u);
     }
   }
+}
+
+// Ball: a ball said within (beyond) has no point beyond (within) it, its farthest point towards the
+// nearest face included; at the exact edge (limit = Distance(centre) + radius) it is not decided.
+TEST(ConvexHull, BallSidesNeverContradictBeyond) {
+  std::mt19937 rng(5);
+  const V3 axes(0.05, 0.03, 0.012);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const std::vector<V4> planes = EllipsoidPlanes(4000, axes, rng);
+  const ConvexHull hull(planes, V3::Zero());
+  std::size_t within = 0, beyond = 0, across = 0;
+  for (int q = 0; q < 400; ++q) {
+    const V3 centre(2.0 * unit(rng) * axes.x(), 2.0 * unit(rng) * axes.y(), 2.0 * unit(rng) * axes.z());
+    const double radius = 0.01 * (1.0 + unit(rng));
+    const double d = Scan(planes, centre);
+    // The face that sets Distance(centre): the ball's point farthest out along it.
+    std::size_t top = 0;
+    for (std::size_t f = 0; f < planes.size(); ++f)
+      if (planes[f].head<3>().dot(centre) + planes[f][3] == d) top = f;
+    std::vector<V3> points{centre + radius * planes[top].head<3>(), centre - radius * planes[top].head<3>()};
+    for (int m = 0; m < 40; ++m)
+      points.push_back(centre + radius * std::cbrt(0.5 * (1.0 + unit(rng))) *
+                                    V3(normal(rng), normal(rng), normal(rng)).normalized());
+    for (const double limit : {d + radius, d - radius, d + radius + 1e-4, d - radius - 1e-4, d, 0.0, 0.004}) {
+      const ConvexHull::BallSide ball = hull.Ball(centre, radius, limit);
+      ASSERT_EQ(ball.distance, d);
+      within += ball.side == ConvexHull::Side::kWithin ? 1u : 0u;
+      beyond += ball.side == ConvexHull::Side::kBeyond ? 1u : 0u;
+      across += ball.side == ConvexHull::Side::kAcross ? 1u : 0u;
+      const auto expected = limit == d + radius || limit == d - radius ? ConvexHull::Side::kAcross
+                            : limit == d + radius + 1e-4               ? ConvexHull::Side::kWithin
+                            : limit == d - radius - 1e-4               ? ConvexHull::Side::kBeyond
+                                                                       : ball.side;
+      EXPECT_EQ(ball.side, expected) << q << ", limit " << limit;
+      for (const V3& p : points) {
+        if (ball.side != ConvexHull::Side::kAcross) {
+          EXPECT_EQ(hull.Beyond(p, limit), ball.side == ConvexHull::Side::kBeyond) << q << ", limit " << limit;
+        }
+      }
+    }
+  }
+  EXPECT_GT(within, 400u);
+  EXPECT_GT(beyond, 400u);
+  EXPECT_GT(across, 800u);
+  // A point (radius 0) is decided when clear of the limit, else left to Beyond.
+  EXPECT_EQ(hull.Ball(V3::Zero(), 0.0, 0.0).side, ConvexHull::Side::kWithin);
+  EXPECT_EQ(hull.Ball(V3(1.0, 0.0, 0.0), 0.0, 0.0).side, ConvexHull::Side::kBeyond);
+  EXPECT_EQ(ConvexHull().Ball(V3(1.0, 2.0, 3.0), 5.0, -1e300).side, ConvexHull::Side::kWithin);
 }
 
 TEST(ConvexHull, NoFacesHaveNoInside) {

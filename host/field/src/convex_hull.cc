@@ -122,4 +122,12 @@ bool ConvexHull::Beyond(const Eigen::Vector3d& p, double limit) const {
   return false;
 }
 
+ConvexHull::BallSide ConvexHull::Ball(const Eigen::Vector3d& centre, double radius, double limit) const {
+  const double distance = Distance(centre);
+  const double slack = Slack(centre) + 1e-9 * radius;
+  if (distance + radius + slack <= limit) return {Side::kWithin, distance};
+  if (distance - radius - slack > limit) return {Side::kBeyond, distance};
+  return {Side::kAcross, distance};
+}
+
 }  // namespace palpa::field

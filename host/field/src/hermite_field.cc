@@ -1107,9 +1107,7 @@ class ClosingRule {
  private:
   // Whether p lies beyond hull_beyond_ of the samples' hull, asked once per point: every ball
   // holding p may ask it (a sphere's: all of them), and a hull may have tens of thousands of faces.
-  struct HullSide {
-    int beyond = -1;  // -1 not yet asked
-  };
+  using HullSide = std::optional<bool>;
   // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
   // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
   // sample, in kBehindSectors sectors (or, a medial ball's, within hull_beyond_ of the hull).
@@ -1127,8 +1125,8 @@ class ClosingRule {
     if (t.norm() < kBehindShare * d.norm()) {
       if (std::popcount(mask) >= kBehindSectors) return true;
       if (medial_[i] == 0 || hull_.empty()) return false;
-      if (side.beyond < 0) side.beyond = hull_.Beyond(p, hull_beyond_) ? 1 : 0;
-      return side.beyond == 0;
+      if (!side) side = hull_.Beyond(p, hull_beyond_);
+      return !*side;
     }
     const auto& [e1, e2] = frames_[i];
     const double sector = std::atan2(-t.dot(e2), -t.dot(e1)) / (2.0 * std::numbers::pi / kContinueSectors);
@@ -1366,11 +1364,11 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
 // A closed surface lies within a sagitta of its samples' hull, so such a node is the estimate
 // carried past a sparse part's last samples: the cow with 500 samples (seed 4) had 247 phantom
 // nodes, 5.8 voxels deep, under two hooves whose soles no sample lies on, w unclear (0.30-0.93).
-// The distance beyond the hull is taken as g(p) = the largest signed distance to its faces' planes
-// (a lower bound: a node is only ever kept for it). g is 1-Lipschitz, so over a box of nodes it
-// lies within the box's half diagonal of g at its centre: a box is dropped when all of it is
-// within `beyond`, cut when all of it is beyond, else halved, down to single nodes. A box inside
-// one brick is dropped before g is evaluated when it holds no inside node (a dense lattice of g
+// The distance beyond the hull is taken as g(p) = ConvexHull::Distance, the largest signed distance
+// to its faces' planes (a lower bound: a node is only ever kept for it). g is 1-Lipschitz, so a box
+// of nodes is dropped when its ball lies within `beyond`, cut when beyond it (ConvexHull::Ball),
+// else halved, down to single nodes. A box inside one brick is dropped before g is evaluated when
+// it holds no inside node (a dense lattice of g
 // at the brick corners, filled over every block reaching past `beyond`, cost 2.5-4 x as much at
 // 1,200 cells).
 std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const ConvexHull& hull, double beyond) {
@@ -1380,7 +1378,6 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const Co
   const auto band = static_cast<float>(grid.band_voxels);
   constexpr int kB = SparseField::kBrick;
   constexpr int kBlock = 8;  // bricks per edge of the boxes first tested, spread over the threads
-  const auto g = [&](const V3& p) { return hull.Distance(p); };
   // A cube of nodes from `lo`, `size` (a power of 2) on each axis, clipped to the grid; the first
   // ones are aligned blocks of bricks, so a cube of at most kB nodes lies in one brick.
   struct Box {
@@ -1445,9 +1442,11 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const Co
         centre[static_cast<Eigen::Index>(d)] = 0.5 * (box.lo[d] + hi[d] - 1);
         half[static_cast<Eigen::Index>(d)] = 0.5 * (hi[d] - box.lo[d] - 1);
       }
-      const double gc = g(grid.origin_m + h * centre), reach = h * half.norm();
-      if (gc + reach <= beyond) continue;
-      if (gc - reach > beyond) {  // wholly beyond (a single node always is, here)
+      // A single node (reach 0) is decided by its own distance, as Beyond decides it.
+      const double reach = h * half.norm();
+      const auto [side, gc] = hull.Ball(grid.origin_m + h * centre, reach, beyond);
+      if (side == ConvexHull::Side::kWithin || (reach == 0.0 && !(gc > beyond))) continue;
+      if (side == ConvexHull::Side::kBeyond || reach == 0.0) {  // wholly beyond
         for (int bi = box.lo[0] / kB; bi * kB < hi[0]; ++bi)
           for (int bj = box.lo[1] / kB; bj * kB < hi[1]; ++bj)
             for (int bk = box.lo[2] / kB; bk * kB < hi[2]; ++bk) {
@@ -1904,17 +1903,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       const V3 centre = BrickCentre(grid.origin_m, h, {bi, bj, bk});
       const double half_diagonal = 0.5 * (kB - 1) * std::sqrt(3.0) * h;
       nearest.Box(centre, half_diagonal * (1.0 + 1e-9));
-      // Whether a node of the brick lies beyond hull_beyond of the samples' hull. ConvexHull::Distance is
-      // 1-Lipschitz: with the brick's centre within hull_beyond less its half diagonal (and a
-      // rounding slack), no node is, and the planes need not be scanned node by node (the far
-      // pass's carry rule asked for 250,000 nodes of fin90, each scanning every plane).
-      int within_hull = -1;  // -1 not yet asked
+      // Whether a node of the brick lies beyond hull_beyond of the samples' hull: asked of the
+      // brick's ball first, so that the planes need not be read node by node (the far pass's carry
+      // rule asked for 250,000 nodes of fin90).
+      std::optional<bool> within_hull;
       const auto beyond_hull = [&](const V3& p) {
-        if (within_hull < 0)
-          within_hull =
-              hull.Distance(centre) + half_diagonal + 1e-9 * (1.0 + centre.norm() + half_diagonal) <= hull_beyond ? 1
-                                                                                                                  : 0;
-        return within_hull == 0 && hull.Beyond(p, hull_beyond);
+        if (!within_hull) within_hull = hull.Ball(centre, half_diagonal, hull_beyond).side == ConvexHull::Side::kWithin;
+        return !*within_hull && hull.Beyond(p, hull_beyond);
       };
       float* values = field.BrickValues(b);
       node.clear();

@@ -33,6 +33,19 @@ class ConvexHull {
   /// Distance(p) > limit, as the scan answers it.
   bool Beyond(const Eigen::Vector3d& p, double limit) const;
 
+  /// Where a ball lies against `limit`: no point of it beyond (kWithin), every point beyond
+  /// (kBeyond), or not known without asking point by point (kAcross).
+  enum class Side { kWithin, kAcross, kBeyond };
+  struct BallSide {
+    Side side;
+    double distance;  ///< Distance(centre), for a caller that needs it too
+  };
+  /// The ball of `radius` (>= 0, the planes' units) about `centre` against `limit`, from
+  /// Distance(centre) and its 1-Lipschitz bound with a rounding slack: kWithin and kBeyond never
+  /// contradict Beyond(p, limit) at a point p of the ball. A ball of radius 0 is kAcross unless
+  /// clear by more than the slack: ask Beyond. Without faces: kWithin.
+  BallSide Ball(const Eigen::Vector3d& centre, double radius, double limit) const;
+
  private:
   // Faces whose normals lie within a cone: axis (unit), cos and sin of its half angle (rounded
   // towards a wider cone), and the largest n . centre + d among them.
