@@ -1009,6 +1009,49 @@ TEST(Winding, OneSidedScanIsClosedRoundBelowItsRim) {
   EXPECT_EQ(wrong, 0u) << "of " << checked;
 }
 
+// Issue 20: a scan leaves a few samples in the hole it does not cover (a sphere scanned above
+// z = c r, and 1 in 64 of its samples below (c - 0.3) r kept, each several spacings from any
+// other). Past the rim w falls below kBallClosingWinding, where only a rim's balls close; the
+// strays lie nearer many of those nodes than the rim does, and must not hide it (CGAL's
+// radar.xyz, a sphere with a sparse lower cap). Hole nodes more than 3 voxels inside the sphere,
+// c = 0 / 0.3: 254 / 6,044 with the nearest sample alone deciding whether a node lies beyond a
+// rim, 0 / 333 passing over lone samples (kLoneSampleSpacings; each stray here 3.8-9.2 x the
+// median spacing).
+TEST(Winding, StraySamplesInAnOpenSideDoNotHideItsRim) {
+  const auto pts = ReadPoints(DataFile("sphere926.pwn"));
+  ASSERT_TRUE(pts) << pts.error().message;
+  const double r = 0.03;
+  for (const double cut : {0.0, 0.3}) {
+    std::vector<Eigen::Vector3d> p, n;
+    std::size_t strays = 0, below = 0;
+    for (std::size_t i = 0; i < pts->positions.size(); ++i) {
+      const Eigen::Vector3d& x = pts->positions[i];
+      const bool scanned = x.z() > cut * x.norm();
+      const bool stray = !scanned && x.z() < (cut - 0.3) * x.norm() && below++ % 64 == 0;
+      if (!scanned && !stray) continue;
+      strays += stray ? 1u : 0u;
+      p.push_back(3e-3 * x);
+      n.push_back(pts->normals[i]);
+    }
+    EXPECT_GE(strays, 6u);
+    BuildOptions options;
+    options.grid.cells = 96;
+    const auto built = BuildField(p, n, options);
+    ASSERT_TRUE(built) << built.error().message;
+    const GridSpec& g = built->field.grid();
+    std::size_t wrong = 0, checked = 0, face_inside = 0;
+    ForEachNode(built->field, [&](const Eigen::Vector3d& x, bool inside, bool face) {
+      if (face && inside) ++face_inside;
+      if (std::abs(x.norm() - r) / g.voxel_m <= 3.0) return;
+      ++checked;
+      wrong += inside != (x.norm() < r) ? 1u : 0u;
+    });
+    EXPECT_EQ(face_inside, 0u) << "cut " << cut;
+    EXPECT_GT(checked, 600000u);
+    EXPECT_LE(wrong, cut == 0.0 ? 0u : 400u) << "cut " << cut << ", of " << checked;
+  }
+}
+
 // Issue 20: a sphere scanned only above z = -0.17 r (nothing below it in the grid fitted to the
 // samples, which ends ~0.4 r above the sphere's bottom). The closure leaves the grid's bottom face,
 // so BuildField grows the grid, voxel kept, to hold it; past the rim, where w falls to ~0.2, the
