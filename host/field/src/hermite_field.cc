@@ -991,11 +991,11 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 // surface. Used by LabelByWinding and ClosureBeyondGrid alike.
 class ClosingRule {
  public:
-  // `spacing`: SampleSpacing of `positions`. Probes every ball once (kContinueSectors x
+  // `spacing`: SampleSpacing of `positions`, `median_spacing` its median. Probes every ball once (kContinueSectors x
   // kContinueDegrees nearest-sample queries per sample, one more at the antipode where those pass).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
               const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing,
-              const ConvexHull& hull, double hull_beyond)
+              double median_spacing, const ConvexHull& hull, double hull_beyond)
       : tree_(tree),
         inner_(inner),
         rim_(rim),
@@ -1045,7 +1045,6 @@ class ClosingRule {
         medial_[i] = far_side && -far_side->dot(n) >= kContinueCos ? 1 : 0;
       }
     });
-    const double median_spacing = detail::Median(spacing);
     for (std::size_t i = 0; i < lone_.size(); ++i) lone_[i] = spacing[i] > kLoneSampleSpacings * median_spacing ? 1 : 0;
     // Only those can close a point beyond the nearest; a flat face's balls (a cube's: radius up to
     // r_max) never are, and would make every search long.
@@ -1100,12 +1099,13 @@ class ClosingRule {
       return false;
     };
     // Below kBallClosingWinding only a rim closes: the nearest samples decide before the search.
+    std::size_t got = 0;
     if (w < kBallClosingWinding) {
-      std::size_t got = find(1);
+      got = find(1);
       if (got == 1 && rim_[idx[0]] == 0 && lone_[idx[0]] != 0) got = find(kClosingBalls);
       if (!beyond_rim(got)) return {};
     }
-    const std::size_t got = find(kClosingBalls);
+    if (got < kClosingBalls) got = find(kClosingBalls);
     if (got == 0) return {};
     const double threshold = beyond_rim(got) ? kRimClosingWinding : kBallClosingWinding;
     if (w < threshold) return {};
@@ -1521,7 +1521,7 @@ struct SideRules {
           return detail::ConvexHullOf(hull_points);
         }()),
         hull_beyond(std::max(kHullVoxels * voxel_m, kHullSpacings * median_spacing)),
-        rule(tree, inner, rim, positions, normals, spacing, hull, hull_beyond) {}
+        rule(tree, inner, rim, positions, normals, spacing, median_spacing, hull, hull_beyond) {}
   SideRules(const SideRules&) = delete;
   SideRules& operator=(const SideRules&) = delete;
 
