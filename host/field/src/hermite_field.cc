@@ -188,8 +188,9 @@ constexpr double kRimClosingWinding = 0.1;
 // a lone sample, such as a scan leaves in a hole it does not cover, not its surface: asked
 // whether a point lies beyond a rim, it passes the question on to the next nearest sample.
 // CGAL's radar.xyz (a sphere's bare points, its lower cap sparse): the nodes that cap lost had a
-// lone nearest sample, 4.5-15 x the median spacing by the 16th nearest; the nodes a range scan's
-// rim closes, 1.1-1.5 x. With 2: the radar's far-wrong nodes 364,144 -> 17,581; the 111 open and
+// lone nearest sample, 4.5-15 x the median spacing by the 16th nearest; the phantom nodes that
+// asking the nearest rim among the 16 nearest instead closed beside a range scan's rim (CGAL's
+// triceratops), 1.1-1.5 x. With 2: the radar's far-wrong nodes 364,144 -> 17,581; the 111 open and
 // range rows of 37 meshes change by at most 55 far-wrong nodes, 2,144,354 -> 2,144,298 in all.
 constexpr double kLoneSampleSpacings = 2.0;
 // On an open set the far pass lets w decide a node the local estimate holds inside, w unclear
@@ -991,8 +992,9 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 // surface. Used by LabelByWinding and ClosureBeyondGrid alike.
 class ClosingRule {
  public:
-  // `spacing`: SampleSpacing of `positions`, `median_spacing` its median. Probes every ball once (kContinueSectors x
-  // kContinueDegrees nearest-sample queries per sample, one more at the antipode where those pass).
+  // `spacing`: SampleSpacing of `positions`, `median_spacing` its median. Probes every ball once
+  // (kContinueSectors x kContinueDegrees nearest-sample queries per sample, one more at the
+  // antipode where those pass).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
               const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing,
               double median_spacing, const ConvexHull& hull, double hull_beyond)
@@ -1090,8 +1092,8 @@ class ClosingRule {
     };
     // Beyond a rim, the missing part lies behind the rim's tangent plane. The nearest sample
     // decides, or, when it is a lone sample (kLoneSampleSpacings), the next nearest.
-    const auto beyond_rim = [&](std::size_t got) {
-      for (std::size_t m = 0; m < got; ++m) {
+    const auto beyond_rim = [&](std::size_t found) {
+      for (std::size_t m = 0; m < found; ++m) {
         const std::size_t i = idx[m];
         if (rim_[i] != 0) return (p - positions_[i]).dot(normals_[i]) < 0.0;
         if (lone_[i] == 0) return false;
@@ -1393,9 +1395,8 @@ std::size_t SmoothClosure(SparseField& field, std::span<const std::size_t> brick
 // to its faces' planes (a lower bound: a node is only ever kept for it). g is 1-Lipschitz, so a box
 // of nodes is dropped when its ball lies within `beyond`, cut when beyond it (ConvexHull::Ball),
 // else halved, down to single nodes. A box inside one brick is dropped before g is evaluated when
-// it holds no inside node (a dense lattice of g
-// at the brick corners, filled over every block reaching past `beyond`, cost 2.5-4 x as much at
-// 1,200 cells).
+// it holds no inside node (a dense lattice of g at the brick corners, filled over every block
+// reaching past `beyond`, cost 2.5-4 x as much at 1,200 cells).
 std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const ConvexHull& hull, double beyond) {
   if (hull.empty()) return 0;
   const GridSpec& grid = field.grid();
