@@ -110,9 +110,13 @@ TEST(ConvexHull, BallSidesNeverContradictBeyond) {
   EXPECT_GT(within, 400u);
   EXPECT_GT(beyond, 400u);
   EXPECT_GT(across, 800u);
-  // A point (radius 0) is decided when clear of the limit, else left to Beyond.
+  // A point (radius 0) is decided exactly, as Beyond decides it, at its own distance too.
   EXPECT_EQ(hull.Ball(V3::Zero(), 0.0, 0.0).side, ConvexHull::Side::kWithin);
   EXPECT_EQ(hull.Ball(V3(1.0, 0.0, 0.0), 0.0, 0.0).side, ConvexHull::Side::kBeyond);
+  const V3 on(0.05, 0.0, 0.0);
+  const double at = Scan(planes, on);
+  EXPECT_EQ(hull.Ball(on, 0.0, at).side, ConvexHull::Side::kWithin);
+  EXPECT_EQ(hull.Ball(on, 0.0, std::nextafter(at, -1.0)).side, ConvexHull::Side::kBeyond);
   EXPECT_EQ(ConvexHull().Ball(V3(1.0, 2.0, 3.0), 5.0, -1e300).side, ConvexHull::Side::kWithin);
 }
 

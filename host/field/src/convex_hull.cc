@@ -124,6 +124,8 @@ bool ConvexHull::Beyond(const Eigen::Vector3d& p, double limit) const {
 
 ConvexHull::BallSide ConvexHull::Ball(const Eigen::Vector3d& centre, double radius, double limit) const {
   const double distance = Distance(centre);
+  // A point needs no slack: Distance is the scan's value, as Beyond's.
+  if (radius == 0.0) return {distance > limit ? Side::kBeyond : Side::kWithin, distance};
   const double slack = Slack(centre) + 1e-9 * radius;
   if (distance + radius + slack <= limit) return {Side::kWithin, distance};
   if (distance - radius - slack > limit) return {Side::kBeyond, distance};

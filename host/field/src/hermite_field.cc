@@ -1007,7 +1007,8 @@ class ClosingRule {
         hull_beyond_(hull_beyond),
         sectors_(inner.radii.size()),
         medial_(inner.radii.size(), 0),
-        lone_(positions.size(), 0),
+        spacing_(spacing),
+        lone_spacing_(kLoneSampleSpacings * median_spacing),
         frames_(inner.radii.size()),
         far_centres_{&far_centre_points_} {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
@@ -1047,7 +1048,6 @@ class ClosingRule {
         medial_[i] = far_side && -far_side->dot(n) >= kContinueCos ? 1 : 0;
       }
     });
-    for (std::size_t i = 0; i < lone_.size(); ++i) lone_[i] = spacing[i] > kLoneSampleSpacings * median_spacing ? 1 : 0;
     // Only those can close a point beyond the nearest; a flat face's balls (a cube's: radius up to
     // r_max) never are, and would make every search long.
     for (std::size_t i = 0; i < medial_.size(); ++i) {
@@ -1096,7 +1096,7 @@ class ClosingRule {
       for (std::size_t m = 0; m < found; ++m) {
         const std::size_t i = idx[m];
         if (rim_[i] != 0) return (p - positions_[i]).dot(normals_[i]) < 0.0;
-        if (lone_[i] == 0) return false;
+        if (!Lone(i)) return false;
       }
       return false;
     };
@@ -1104,7 +1104,7 @@ class ClosingRule {
     std::size_t got = 0;
     if (w < kBallClosingWinding) {
       got = find(1);
-      if (got == 1 && rim_[idx[0]] == 0 && lone_[idx[0]] != 0) got = find(kClosingBalls);
+      if (got == 1 && rim_[idx[0]] == 0 && Lone(idx[0])) got = find(kClosingBalls);
       if (!beyond_rim(got)) return {};
     }
     if (got < kClosingBalls) got = find(kClosingBalls);
@@ -1134,6 +1134,8 @@ class ClosingRule {
   // Whether p lies beyond hull_beyond_ of the samples' hull, asked once per point: every ball
   // holding p may ask it (a sphere's: all of them), and a hull may have tens of thousands of faces.
   using HullSide = std::optional<bool>;
+  // A lone sample (kLoneSampleSpacings).
+  bool Lone(std::size_t i) const { return spacing_[i] > lone_spacing_; }
   // Whether sample i's ball continues the surface towards p: the surface lies on the ball in the
   // sector opposite p's direction along the tangent plane, or, for p nearly straight behind the
   // sample, in kBehindSectors sectors (or, a medial ball's, within hull_beyond_ of the hull).
@@ -1197,7 +1199,8 @@ class ClosingRule {
   double hull_beyond_;
   std::vector<std::uint8_t> sectors_;      // bit k: the ball lies on the surface in sector k (Continues)
   std::vector<std::uint8_t> medial_;       // 1: the ball's antipode lies on the surface, facing away
-  std::vector<std::uint8_t> lone_;         // 1: a lone sample (kLoneSampleSpacings)
+  const std::vector<double>& spacing_;     // SampleSpacing
+  double lone_spacing_;                    // kLoneSampleSpacings x the median spacing
   std::vector<std::pair<V3, V3>> frames_;  // detail::AngleFrame of each sample's normal: the sectors' axes
   std::vector<std::size_t> far_balls_;     // the medial balls (kClosingBalls), for far_tree_
   std::vector<V3> far_centre_points_;      // their centres
@@ -1468,11 +1471,9 @@ std::size_t CutBeyondSampleHull(SparseField& field, const KdTree& wide, const Co
         centre[static_cast<Eigen::Index>(d)] = 0.5 * (box.lo[d] + hi[d] - 1);
         half[static_cast<Eigen::Index>(d)] = 0.5 * (hi[d] - box.lo[d] - 1);
       }
-      // A single node (reach 0) is decided by its own distance, as Beyond decides it.
-      const double reach = h * half.norm();
-      const auto [side, gc] = hull.Ball(grid.origin_m + h * centre, reach, beyond);
-      if (side == ConvexHull::Side::kWithin || (reach == 0.0 && !(gc > beyond))) continue;
-      if (side == ConvexHull::Side::kBeyond || reach == 0.0) {  // wholly beyond
+      const ConvexHull::Side side = hull.Ball(grid.origin_m + h * centre, h * half.norm(), beyond).side;
+      if (side == ConvexHull::Side::kWithin) continue;
+      if (side == ConvexHull::Side::kBeyond) {  // wholly beyond (a single node always is, here)
         for (int bi = box.lo[0] / kB; bi * kB < hi[0]; ++bi)
           for (int bj = box.lo[1] / kB; bj * kB < hi[1]; ++bj)
             for (int bk = box.lo[2] / kB; bk * kB < hi[2]; ++bk) {

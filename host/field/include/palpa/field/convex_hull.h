@@ -42,8 +42,8 @@ class ConvexHull {
   };
   /// The ball of `radius` (>= 0, the planes' units) about `centre` against `limit`, from
   /// Distance(centre) and its 1-Lipschitz bound with a rounding slack: kWithin and kBeyond never
-  /// contradict Beyond(p, limit) at a point p of the ball. A ball of radius 0 is kAcross unless
-  /// clear by more than the slack: ask Beyond. Without faces: kWithin.
+  /// contradict Beyond(p, limit) at a point p of the ball. A ball of radius 0 is decided exactly,
+  /// as Beyond(centre, limit). Without faces: kWithin.
   BallSide Ball(const Eigen::Vector3d& centre, double radius, double limit) const;
 
  private:
