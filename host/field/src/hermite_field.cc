@@ -1118,14 +1118,19 @@ class ClosingRule {
     // Below kBallClosingWinding only a point behind the surface closes: the nearest samples
     // decide before the search, the first alone when it is a rim or cannot enclose p.
     std::size_t got = 0;
+    bool behind = false;
     if (w < kBallClosingWinding) {
       got = find(1);
       if (got == 1 && rim_[idx[0]] == 0 && (Lone(idx[0]) || MayEnclose(idx[0], p))) got = find(kClosingBalls);
-      if (!behind_surface(got)) return {};
+      behind = behind_surface(got);
+      if (!behind) return {};
+      if (got < kClosingBalls) got = find(kClosingBalls);  // a rim decided: the balls need the rest
+    } else {
+      got = find(kClosingBalls);
+      behind = behind_surface(got);
     }
-    if (got < kClosingBalls) got = find(kClosingBalls);
     if (got == 0) return {};
-    const double threshold = behind_surface(got) ? kRimClosingWinding : kBallClosingWinding;
+    const double threshold = behind ? kRimClosingWinding : kBallClosingWinding;
     if (w < threshold) return {};
     double best = std::numeric_limits<double>::infinity();
     HullSide hull_side;
