@@ -889,6 +889,52 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
   return rim;
 }
 
+// The winding number's areas with each rim sample's (RimSamples, `rim` 1) scaled by the share of
+// its disc that its neighbours surround, 1 - (widest tangent gap) / 2 pi (issue 20). SampleAreas
+// takes pi s^2 / k from the kth neighbour distance s, which on a rim reaches across the scanned
+// side only: a rim sample's area comes out about twice its share (CGAL's cube-meshed range scan,
+// 2.15 times the median), and the dipoles along the rim lift w on the open side's closing surface
+// (0.54 there, so phantom solid 6 voxels under the unscanned face). Scaled (with RimLift), the
+// cube's range scan has 0 far-wrong nodes (21,960), the 84 CGAL open and range rows 1,452,548 ->
+// 1,304,742 and the bundled 27 692,134 -> 632,290; docs/field-methods.md § Open sides: rim
+// samples' areas. On an open set only: a closed set's rim samples are sampling gaps, whose discs
+// stand for the gap. Sizes as `positions`; `tree` over `positions`; areas in m^2.
+std::vector<double> RimAreas(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                             std::vector<double> areas, const std::vector<std::uint8_t>& rim) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
+    std::array<std::size_t, kRimNeighbours + 1> idx{};
+    std::array<double, kRimNeighbours + 1> d2{};
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (rim[i] == 0) continue;
+      const std::size_t got = tree.knnSearch(positions[i].data(), kRimNeighbours + 1, idx.data(), d2.data());
+      const detail::TangentGap widest =
+          detail::WidestTangentGap<kRimNeighbours + 1>(positions, idx.data(), got, i, normals[i]);
+      areas[i] *= 1.0 - widest.gap / (2.0 * std::numbers::pi);
+    }
+  });
+  return areas;
+}
+
+// The part of w that RimAreas took away: a winding number of the rim samples alone, each with the
+// area it lost (`plain` SampleAreas less `scaled`, m^2); null when none lost any. ClosingRule adds
+// it back where it reads the balls' window (kBallClosingWinding, kRimClosingWinding): those
+// thresholds say how much of the scanned surface a point beyond the rim sees, and on the plain
+// areas they closed a sphere's missing part round (Winding.StraySamplesInAnOpenSideDoNotHideItsRim:
+// with the scaled w alone, 221 -> 809 hole nodes under the rim).
+std::unique_ptr<WindingNumber> RimLift(const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                       const std::vector<double>& plain, const std::vector<double>& scaled,
+                                       const std::vector<std::uint8_t>& rim) {
+  std::vector<V3> at, along;
+  std::vector<double> lost;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    if (rim[i] == 0 || !(plain[i] > scaled[i])) continue;
+    at.push_back(positions[i]);
+    along.push_back(normals[i]);
+    lost.push_back(plain[i] - scaled[i]);
+  }
+  return at.empty() ? nullptr : std::make_unique<WindingNumber>(at, along, lost);
+}
+
 // The surface's own level of w near a point (issue 20): the mean of SampleProbes::Levels over the
 // given samples (the point's nearest), within [kBallClosingWinding, 1/2]; 1/2 with none.
 double LocalLevel(const std::vector<double>& levels, std::span<const std::size_t> nearest) {
@@ -1006,12 +1052,13 @@ SetClosure ClosedSet(const std::vector<V3>& normals, const std::vector<double>& 
 // (kEnclosedCos). Used by LabelByWinding and ClosureBeyondGrid alike.
 class ClosingRule {
  public:
-  // `spacing`: SampleSpacing of `positions`, `median_spacing` its median. Probes every ball once
-  // (kContinueSectors x kContinueDegrees nearest-sample queries per sample, one more at the
-  // antipode where those pass).
+  // `spacing`: SampleSpacing of `positions`, `median_spacing` its median. `lift` (RimLift, may be
+  // null; it must outlive this) is added to the caller's w wherever the balls' window is read.
+  // Probes every ball once (kContinueSectors x kContinueDegrees nearest-sample queries per sample,
+  // one more at the antipode where those pass).
   ClosingRule(const KdTree& tree, const Packing& inner, const std::vector<std::uint8_t>& rim,
               const std::vector<V3>& positions, const std::vector<V3>& normals, const std::vector<double>& spacing,
-              double median_spacing, const ConvexHull& hull, double hull_beyond)
+              double median_spacing, const ConvexHull& hull, double hull_beyond, const WindingNumber* lift)
       : tree_(tree),
         inner_(inner),
         rim_(rim),
@@ -1023,6 +1070,7 @@ class ClosingRule {
         medial_(inner.radii.size(), 0),
         spacing_(spacing),
         lone_spacing_(kLoneSampleSpacings * median_spacing),
+        lift_(lift),
         frames_(inner.radii.size()),
         far_centres_{&far_centre_points_} {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sectors_.size(), 64), [&](const auto& range) {
@@ -1079,7 +1127,7 @@ class ClosingRule {
   ClosingRule& operator=(const ClosingRule&) = delete;
   struct Balls {
     double phi = std::numeric_limits<double>::infinity();  // metres; +infinity: the test does not apply
-    double threshold = kBallClosingWinding;                // the w below which the balls do not close
+    double threshold = kBallClosingWinding;                // the caller's w below which the balls do not close
   };
   // Signed distance to the union of the inner balls of the samples nearest p, where w is unclear.
   // `box`, when given, finds the nearest samples instead of the tree (a NearestInBox over the same
@@ -1089,14 +1137,21 @@ class ClosingRule {
   // `stop_below` (metres): once a ball gives phi below it, that phi is returned, not the deepest
   // (the callers clamp a value to the band, or read only its sign: the same answer, and a node
   // deep within a sphere's balls no longer visits every one of them; CGAL's radar.xyz).
+  // `lift`, when given, is RimLift's w at p, from the caller's batch.
   Balls BallPhi(double w, const V3& p, NearestInBox* box = nullptr,
-                double stop_below = -std::numeric_limits<double>::infinity()) const {
-    return w >= 0.5 ? Balls{} : BallsAt(w, p, box, stop_below);
+                double stop_below = -std::numeric_limits<double>::infinity(),
+                std::optional<double> lift = std::nullopt) const {
+    return w >= 0.5 ? Balls{} : BallsAt(w, p, box, stop_below, lift);
   }
   // BallPhi at w >= 1/2 as well (down to kRimClosingWinding): for the far pass, where the local
   // estimate holds a node outside on an open side and w leans inside but is unclear.
   Balls BallsAt(double w, const V3& p, NearestInBox* box = nullptr,
-                double stop_below = -std::numeric_limits<double>::infinity()) const {
+                double stop_below = -std::numeric_limits<double>::infinity(),
+                std::optional<double> given_lift = std::nullopt) const {
+    // The window is read on w with the rim's plain areas (RimLift); `threshold` is returned on the
+    // caller's w.
+    const double lift = given_lift ? *given_lift : lift_ != nullptr ? (*lift_)(p) : 0.0;
+    w += lift;
     if (w < kRimClosingWinding) return {};
     std::array<std::size_t, kClosingBalls> idx{};
     std::array<double, kClosingBalls> d2{};
@@ -1138,17 +1193,17 @@ class ClosingRule {
       const std::size_t i = idx[m];
       const double phi = (p - inner_.centres[i]).norm() - inner_.radii[i];
       if (phi < best && (phi >= 0.0 || Continues(i, p, hull_side))) best = phi;
-      if (best < stop_below) return {best, threshold};
+      if (best < stop_below) return {best, threshold - lift};
     }
     if (!(best < 0.0) && far_tree_) {  // every medial ball that holds p (kClosingBalls)
       DeepestContinuing deepest(*this, p, largest_radius_, stop_below, hull_side);
       far_tree_->findNeighbors(deepest, p.data(), nanoflann::SearchParams());
       best = std::min(best, deepest.phi());
     }
-    return {best, threshold};
+    return {best, threshold - lift};
   }
-  bool Inside(double w, const V3& p, NearestInBox* box = nullptr) const {
-    return w >= 0.5 || BallPhi(w, p, box, 0.0).phi < 0.0;
+  bool Inside(double w, const V3& p, NearestInBox* box = nullptr, std::optional<double> lift = std::nullopt) const {
+    return w >= 0.5 || BallPhi(w, p, box, 0.0, lift).phi < 0.0;
   }
 
  private:
@@ -1238,6 +1293,7 @@ class ClosingRule {
   std::vector<std::uint8_t> medial_;       // 1: the ball's antipode lies on the surface, facing away
   const std::vector<double>& spacing_;     // SampleSpacing
   double lone_spacing_;                    // kLoneSampleSpacings x the median spacing
+  const WindingNumber* lift_;              // RimLift; may be null
   std::vector<std::pair<V3, V3>> frames_;  // detail::AngleFrame of each sample's normal: the sectors' axes
   std::vector<std::size_t> far_balls_;     // the medial balls (kClosingBalls), for far_tree_
   std::vector<V3> far_centre_points_;      // their centres
@@ -1545,9 +1601,33 @@ struct SideRules {
   SideRules(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
             const std::vector<V3>& guard_positions, const std::vector<double>& spacing, const Packing& inner,
             double voxel_m, bool hull_cut)
-      : areas(SampleAreas(positions, kAreaNeighbours)),
+      : SideRules(tree, positions, normals, guard_positions, spacing, inner, voxel_m, hull_cut,
+                  SampleAreas(positions, kAreaNeighbours)) {}
+  SideRules(const SideRules&) = delete;
+  SideRules& operator=(const SideRules&) = delete;
+
+  const std::vector<std::uint8_t> rim;  // RimSamples
+  const SetClosure closure;             // ClosedSet, on the plain areas
+  const std::vector<double> areas;      // SampleAreas, on an open set RimAreas; m^2
+  const WindingNumber winding;
+  const std::unique_ptr<WindingNumber> lift;  // RimLift; may be null
+  const double median_spacing;                // metres
+  const ConvexHull hull;
+  const double hull_beyond;  // metres
+  const ClosingRule rule;
+
+ private:
+  // The rim and whether the set is closed are found with the plain areas' w (`plain_areas`,
+  // SampleAreas); on an open set the rim samples' areas are then scaled (RimAreas) and w is built
+  // again on those.
+  SideRules(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
+            const std::vector<V3>& guard_positions, const std::vector<double>& spacing, const Packing& inner,
+            double voxel_m, bool hull_cut, std::vector<double> plain_areas)
+      : rim(RimSamples(tree, positions, normals, WindingNumber(positions, normals, plain_areas))),
+        closure(ClosedSet(normals, plain_areas, rim)),
+        areas(closure.closed ? plain_areas : RimAreas(tree, positions, normals, plain_areas, rim)),
         winding(positions, normals, areas),
-        rim(RimSamples(tree, positions, normals, winding)),
+        lift(RimLift(positions, normals, plain_areas, areas, rim)),
         median_spacing(detail::Median(spacing)),
         // The guards join the hull: they may be a sparse part's only samples. Farther beyond it
         // than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the far pass)
@@ -1560,17 +1640,7 @@ struct SideRules {
           return detail::ConvexHullOf(hull_points);
         }()),
         hull_beyond(std::max(kHullVoxels * voxel_m, kHullSpacings * median_spacing)),
-        rule(tree, inner, rim, positions, normals, spacing, median_spacing, hull, hull_beyond) {}
-  SideRules(const SideRules&) = delete;
-  SideRules& operator=(const SideRules&) = delete;
-
-  const std::vector<double> areas;  // SampleAreas, m^2
-  const WindingNumber winding;
-  const std::vector<std::uint8_t> rim;  // RimSamples
-  const double median_spacing;          // metres
-  const ConvexHull hull;
-  const double hull_beyond;  // metres
-  const ClosingRule rule;
+        rule(tree, inner, rim, positions, normals, spacing, median_spacing, hull, hull_beyond, lift.get()) {}
 };
 
 // Inside/outside of every brick the evaluation left unallocated, from the winding number of the
@@ -1615,17 +1685,18 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cd[0]), [&](const auto& r) {
     // One batch per plane of corners (WindingNumber's batch: one walk of the tree).
     std::vector<V3> p(cd[1] * cd[2]);
-    std::vector<double> w(p.size());
+    std::vector<double> w(p.size()), lift(p.size(), 0.0);  // lift: RimLift's w
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       for (std::size_t j = 0; j < cd[1]; ++j)
         for (std::size_t k = 0; k < cd[2]; ++k)
           p[j * cd[2] + k] =
               node_at(static_cast<double>(i * kB), static_cast<double>(j * kB), static_cast<double>(k * kB));
       winding(p, w);
+      if (sides.lift) (*sides.lift)(p, lift);
       for (std::size_t jk = 0; jk < p.size(); ++jk) {
         const std::size_t c = i * cd[1] * cd[2] + jk;
         corner_w[c] = static_cast<float>(w[jk]);
-        corner_in[c] = rule.Inside(w[jk], p[jk]) ? 1 : 0;
+        corner_in[c] = rule.Inside(w[jk], p[jk], nullptr, lift[jk]) ? 1 : 0;
       }
     }
   });
@@ -1675,6 +1746,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     std::vector<double> threshold(w.size());  // ClosingRule::Balls::threshold
     std::vector<V3> read_at(read.size());
     std::vector<double> read_w(read.size());
+    // RimLift's w at the read nodes, in one batch (ClosingRule::BallPhi's lift); 0 without one.
+    std::vector<double> lifted(w.size(), 0.0), read_lift(read.size(), 0.0);
     NearestInBox nearest(tree, positions, kClosingBalls);
     for (std::size_t m = r.begin(); m != r.end(); ++m) {
       const std::size_t b = mixed[m];
@@ -1687,7 +1760,11 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         read_at[x] = q(cell / (kH * kH), cell / kH % kH, cell % kH);
       }
       winding(read_at, read_w);
-      for (std::size_t x = 0; x < read.size(); ++x) w[read[x]] = read_w[x];
+      if (sides.lift) (*sides.lift)(read_at, read_lift);
+      for (std::size_t x = 0; x < read.size(); ++x) {
+        w[read[x]] = read_w[x];
+        lifted[read[x]] = read_lift[x];
+      }
       // The low halo gives the gradient its w only: no node there is tested for a side, and its
       // balls and thresholds are never read.
       for (int a = 1; a < kH; ++a)
@@ -1695,7 +1772,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           for (int e = 1; e < kH; ++e) {
             if ((a == kH - 1) + (c == kH - 1) + (e == kH - 1) > 1) continue;  // never read
             const auto x = static_cast<std::size_t>((a * kH + c) * kH + e);
-            const ClosingRule::Balls ball = rule.BallPhi(w[x], q(a, c, e), &nearest, clamped_below);
+            const ClosingRule::Balls ball = rule.BallPhi(w[x], q(a, c, e), &nearest, clamped_below, lifted[x]);
             balls[x] = ball.phi / h;
             threshold[x] = ball.threshold;
           }
@@ -1794,7 +1871,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   // The surface's own w level at each sample (1/2 on a densely sampled closed surface, lower on a
   // sparse or thin part), for the unclear nodes below; on closed sets only (an open side's
   // closure has w below the sampled surface's level all over).
-  const SetClosure closure = ClosedSet(normals, areas, rim);
+  const SetClosure& closure = sides.closure;
   const bool closed_set = closure.closed;
   st.samples_open = closure.open_side;
   st.sample_area_m2 = closure.area;
@@ -1955,7 +2032,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     // A brick's nodes that need w (the filters below), then w for all of them in one batch.
     std::vector<int> node;
     std::vector<V3> at;
-    std::vector<double> wn;
+    std::vector<double> wn, lift;  // lift: RimLift's w (ClosingRule::BallPhi)
     NearestInBox nearest(wide, positions, kDiscNeighbours);
     std::vector<std::pair<std::size_t, UnclearNear>> unclear;  // (index into node, its first part)
     std::vector<V3> steps;                                     // their gradient_steps
@@ -2023,6 +2100,8 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         }
       wn.resize(at.size());
       winding(at, wn);
+      lift.assign(at.size(), 0.0);
+      if (sides.lift) (*sides.lift)(at, lift);
       unclear.clear();
       steps.clear();
       for (std::size_t f = 0; f < node.size(); ++f) {
@@ -2032,7 +2111,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         const double w = wn[f];
         if (closed_set && x <= 0.0f && w < kDiscPointMax) {
           const NearDiscs discs = near_discs(p, nearest);
-          if (w + discs.change < kDiscOutside && !rule.Inside(w, p, &nearest)) {
+          if (w + discs.change < kDiscOutside && !rule.Inside(w, p, &nearest, lift[f])) {
             x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(discs.nearest2) / h)));
             ++local;
             // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
@@ -2045,7 +2124,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         // (the spool's open scan: 7,838 hole nodes under its hub, w 0.50-0.56, a medial ball
         // holding them; 6,569 with the balls asked there too, Poisson's far-wrong total 9,663).
         if (!closed_set && x > 0.0f && w < 0.5 + kWindingClear) {
-          if (const double phi = rule.BallsAt(w, p, &nearest, clamped_below).phi; phi < 0.0) {
+          if (const double phi = rule.BallsAt(w, p, &nearest, clamped_below, lift[f]).phi; phi < 0.0) {
             x = -std::min(band, std::max(1e-6f, static_cast<float>(-phi / h)));
             ++local;
             continue;
@@ -2062,7 +2141,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           // hull: the estimate carried the scanned patches or a ball that does not continue the
           // surface on past the scan's edge (a wrist cut flat, a part's unscanned underside, a
           // head's open neck); w's outside decides, as where w is clear.
-          if (!closed_set && x <= 0.0f && !rule.Inside(w, p, &nearest)) {
+          if (!closed_set && x <= 0.0f && !rule.Inside(w, p, &nearest, lift[f])) {
             nearest.Find(p, 1, &idx, &d2);
             found = true;
             carried = (rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx]) || beyond_hull(p);
@@ -2072,7 +2151,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             if (unclear.back().second.wants_gradient) gradient_steps(p, steps);
             continue;
           }
-        } else if (x <= 0.0f && rule.Inside(w, p, &nearest)) {
+        } else if (x <= 0.0f && rule.Inside(w, p, &nearest, lift[f])) {
           continue;  // closed by a rim's balls
         }
         if (!found) nearest.Find(p, 1, &idx, &d2);
