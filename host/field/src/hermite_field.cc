@@ -868,10 +868,14 @@ namespace {
 // widest gap between 16 random neighbours exceeds 150 degrees with probability ~16 (1 - 150/360)^15
 // = 0.5 %; on a rim it is about 180), and the samples' winding number w a little past the sample
 // across that gap is at least kRimProbeWinding: past a rim the point sees the hole, past the edge
-// or tip of a closed thin part it is outside (w ~ 0).
+// or tip of a closed thin part it is outside (w ~ 0). `surrounded`, when given, takes each rim
+// sample's share of its disc that its neighbours surround, 1 - (widest gap) / 2 pi (RimAreas), and
+// 1 elsewhere; sizes as `positions`.
 std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& positions,
-                                     const std::vector<V3>& normals, const WindingNumber& winding) {
+                                     const std::vector<V3>& normals, const WindingNumber& winding,
+                                     std::vector<double>* surrounded = nullptr) {
   std::vector<std::uint8_t> rim(positions.size(), 0);
+  if (surrounded != nullptr) surrounded->assign(positions.size(), 1.0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
     std::array<std::size_t, kRimNeighbours + 1> idx{};
     std::array<double, kRimNeighbours + 1> d2{};
@@ -884,6 +888,7 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
       const V3 across = std::cos(widest.mid) * u + std::sin(widest.mid) * v;
       const V3 beyond = positions[i] + kRimProbeSpacings * std::sqrt(d2[got - 1]) * across;
       rim[i] = winding(beyond) >= kRimProbeWinding ? 1 : 0;
+      if (rim[i] != 0 && surrounded != nullptr) (*surrounded)[i] = 1.0 - widest.gap / (2.0 * std::numbers::pi);
     }
   });
   return rim;
@@ -898,20 +903,9 @@ std::vector<std::uint8_t> RimSamples(const KdTree& tree, const std::vector<V3>& 
 // cube's range scan has 0 far-wrong nodes (21,960), the 84 CGAL open and range rows 1,452,548 ->
 // 1,304,742 and the bundled 27 692,134 -> 632,290; docs/field-methods.md § Open sides: rim
 // samples' areas. On an open set only: a closed set's rim samples are sampling gaps, whose discs
-// stand for the gap. Sizes as `positions`; `tree` over `positions`; areas in m^2.
-std::vector<double> RimAreas(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
-                             std::vector<double> areas, const std::vector<std::uint8_t>& rim) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& r) {
-    std::array<std::size_t, kRimNeighbours + 1> idx{};
-    std::array<double, kRimNeighbours + 1> d2{};
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      if (rim[i] == 0) continue;
-      const std::size_t got = tree.knnSearch(positions[i].data(), kRimNeighbours + 1, idx.data(), d2.data());
-      const detail::TangentGap widest =
-          detail::WidestTangentGap<kRimNeighbours + 1>(positions, idx.data(), got, i, normals[i]);
-      areas[i] *= 1.0 - widest.gap / (2.0 * std::numbers::pi);
-    }
-  });
+// stand for the gap. `surrounded` from RimSamples, same size as `areas` (m^2).
+std::vector<double> RimAreas(std::vector<double> areas, const std::vector<double>& surrounded) {
+  for (std::size_t i = 0; i < areas.size(); ++i) areas[i] *= surrounded[i];
   return areas;
 }
 
@@ -1602,7 +1596,7 @@ struct SideRules {
             const std::vector<V3>& guard_positions, const std::vector<double>& spacing, const Packing& inner,
             double voxel_m, bool hull_cut)
       : SideRules(tree, positions, normals, guard_positions, spacing, inner, voxel_m, hull_cut,
-                  SampleAreas(positions, kAreaNeighbours)) {}
+                  FindRims(tree, positions, normals)) {}
   SideRules(const SideRules&) = delete;
   SideRules& operator=(const SideRules&) = delete;
 
@@ -1617,17 +1611,28 @@ struct SideRules {
   const ClosingRule rule;
 
  private:
-  // The rim and whether the set is closed are found with the plain areas' w (`plain_areas`,
-  // SampleAreas); on an open set the rim samples' areas are then scaled (RimAreas) and w is built
-  // again on those.
+  // The rim is found with the plain areas' w (SampleAreas), once.
+  struct Rims {
+    std::vector<double> plain_areas;  // SampleAreas, m^2
+    std::vector<std::uint8_t> rim;    // RimSamples
+    std::vector<double> surrounded;   // RimSamples' surrounded share
+  };
+  static Rims FindRims(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals) {
+    Rims found{SampleAreas(positions, kAreaNeighbours), {}, {}};
+    found.rim =
+        RimSamples(tree, positions, normals, WindingNumber(positions, normals, found.plain_areas), &found.surrounded);
+    return found;
+  }
+  // Whether the set is closed is decided on the plain areas too; on an open set the rim samples'
+  // areas are then scaled (RimAreas) and w is built again on those.
   SideRules(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals,
             const std::vector<V3>& guard_positions, const std::vector<double>& spacing, const Packing& inner,
-            double voxel_m, bool hull_cut, std::vector<double> plain_areas)
-      : rim(RimSamples(tree, positions, normals, WindingNumber(positions, normals, plain_areas))),
-        closure(ClosedSet(normals, plain_areas, rim)),
-        areas(closure.closed ? plain_areas : RimAreas(tree, positions, normals, plain_areas, rim)),
+            double voxel_m, bool hull_cut, Rims found)
+      : rim(std::move(found.rim)),
+        closure(ClosedSet(normals, found.plain_areas, rim)),
+        areas(closure.closed ? found.plain_areas : RimAreas(found.plain_areas, found.surrounded)),
         winding(positions, normals, areas),
-        lift(RimLift(positions, normals, plain_areas, areas, rim)),
+        lift(RimLift(positions, normals, found.plain_areas, areas, rim)),
         median_spacing(detail::Median(spacing)),
         // The guards join the hull: they may be a sparse part's only samples. Farther beyond it
         // than hull_beyond, a closed set's inside is cut (CutBeyondSampleHull after the far pass)
