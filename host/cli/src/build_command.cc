@@ -375,6 +375,13 @@ int RunBuild(const BuildArgs& args) {
                "the samples' convex hull (a part carried on past its last samples, such as an unsampled end) and were "
                "set outside\n",
                args.points, built.hermite.hull_cut_nodes, built.hermite.hull_cut_beyond_m * 1e3);
+  if (built.hermite.pockets_filled > 0 && !args.quiet)
+    fmt::print(stderr,
+               "palpa build: note: {}: filled {} hollow{} enclosed in the solid ({} nodes): {} lay more than 3 voxels "
+               "from every sample and behind every sample within a spacing of {}, a gap the closure left rather than "
+               "a cavity (a cavity's wall samples face into it)\n",
+               args.points, built.hermite.pockets_filled, built.hermite.pockets_filled == 1 ? "" : "s",
+               built.hermite.pocket_nodes_filled, built.hermite.pockets_filled == 1 ? "it" : "each", "it");
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
                "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; {}, so this "

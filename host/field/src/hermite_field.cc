@@ -25,6 +25,7 @@
 #include "palpa/field/box_nearest.h"
 #include "palpa/field/convex_hull.h"
 #include "palpa/field/index_order.h"
+#include "palpa/field/pockets.h"
 #include "palpa/field/winding.h"
 #include "point_cloud.h"
 
@@ -2237,6 +2238,9 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     open_cut += local;
   });
   st.face_nodes_open = far_faces.load() + open_cut.load();
+  const PocketFill pockets = FillSamplelessPockets(field, positions, normals, spacing);
+  st.pockets_filled = pockets.pockets;
+  st.pocket_nodes_filled = pockets.nodes;
 }
 
 }  // namespace

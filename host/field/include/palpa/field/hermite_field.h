@@ -133,6 +133,12 @@ struct HermiteStats {
   // set outside (a part the estimate carried past its last samples).
   std::size_t hull_cut_nodes = 0;
   double hull_cut_beyond_m = 0.0;
+  // Enclosed outside pockets (no path of outside nodes to a grid face) whose zero surface lies
+  // farther than max(3 voxels, 2 sample spacings) from every sample, filled (set inside), and
+  // their nodes: hollows a closure left, which no sample shows (docs/field-methods.md § Enclosed
+  // pockets that no sample bounds).
+  std::size_t pockets_filled = 0;
+  std::size_t pocket_nodes_filled = 0;
   std::size_t face_nodes_closed = 0;  // inside nodes on a grid face set outside
   std::size_t face_nodes_open = 0;    // of which no sample near faces that grid face: an open side's
   // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the
