@@ -1614,14 +1614,15 @@ struct SideRules {
  private:
   // The rim is found with the plain areas' w (SampleAreas), once.
   struct Rims {
-    std::vector<double> plain_areas;  // SampleAreas, m^2
-    std::vector<std::uint8_t> rim;    // RimSamples
-    std::vector<double> surrounded;   // RimSamples' surrounded share
+    std::vector<double> plain_areas;     // SampleAreas, m^2
+    std::vector<std::uint8_t> rim;       // RimSamples
+    std::vector<double> surrounded;      // RimSamples' surrounded share
+    std::optional<WindingNumber> plain;  // w on the plain areas: a closed set's own, not built twice
   };
   static Rims FindRims(const KdTree& tree, const std::vector<V3>& positions, const std::vector<V3>& normals) {
-    Rims found{SampleAreas(positions, kAreaNeighbours), {}, {}};
-    found.rim =
-        RimSamples(tree, positions, normals, WindingNumber(positions, normals, found.plain_areas), &found.surrounded);
+    Rims found{SampleAreas(positions, kAreaNeighbours), {}, {}, std::nullopt};
+    found.plain.emplace(positions, normals, found.plain_areas);
+    found.rim = RimSamples(tree, positions, normals, *found.plain, &found.surrounded);
     return found;
   }
   // Whether the set is closed is decided on the plain areas too; on an open set the rim samples'
@@ -1632,7 +1633,7 @@ struct SideRules {
       : rim(std::move(found.rim)),
         closure(ClosedSet(normals, found.plain_areas, rim)),
         areas(closure.closed ? found.plain_areas : RimAreas(found.plain_areas, found.surrounded)),
-        winding(positions, normals, areas),
+        winding(closure.closed ? std::move(*found.plain) : WindingNumber(positions, normals, areas)),
         lift(RimLift(positions, normals, found.plain_areas, areas, rim)),
         median_spacing(detail::Median(spacing)),
         // The guards join the hull: they may be a sparse part's only samples. Farther beyond it
