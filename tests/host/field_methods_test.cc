@@ -1475,6 +1475,7 @@ TEST(Winding, OpenScanClosureIsSmoothedBeyondTheSamples) {
   const PointSet device = ApplyTransform(fit, model);
   BuildOptions options;
   options.grid.cells = 150;
+  options.sampleless_components = false;  // the vote alone (they would remove the rough pieces too)
   options.smooth_closure = false;
   auto without = BuildField(device.positions, device.normals, options);
   options.smooth_closure = true;
@@ -1493,6 +1494,16 @@ TEST(Winding, OpenScanClosureIsSmoothedBeyondTheSamples) {
   EXPECT_EQ(after.outside, 1u);
   EXPECT_LE(r_after.far_wrong(), r_before.far_wrong());
   EXPECT_LE(r_after.wrong_sign_in_band_percent, r_before.wrong_sign_in_band_percent);
+  // The rough closure's pieces that no sample bounds are also filled and cut without the vote
+  // (FillSamplelessPockets, CutSamplelessIslands): one inside, one outside.
+  options.smooth_closure = false;
+  options.sampleless_components = true;
+  auto unvoted = BuildField(device.positions, device.normals, options);
+  ASSERT_TRUE(unvoted.has_value());
+  const Components pieces = CountComponents(unvoted->field);
+  EXPECT_EQ(pieces.inside, 1u);
+  EXPECT_EQ(pieces.outside, 1u);
+  EXPECT_GT(unvoted->hermite.pockets_filled + unvoted->hermite.islands_cut, 0u);
 }
 
 // Issue 20: an upright torus (ring 30 mm, tube 10 mm) scanned from above keeps 65 % of 5,000

@@ -1,6 +1,7 @@
 // FillSamplelessPockets against an analytic solid: a ball with outside pockets cut into it, some
 // enclosed and some joined to the outside by one-node tunnels, with samples on the ball and on one
 // pocket; what is filled, and every node's sign and value, are worked out from the construction.
+// CutSamplelessIslands the same way, on small balls floating beside a sampled one.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -70,6 +71,15 @@ struct Solid {
     return -1;
   }
 };
+
+// A grid of 1-metre voxels from the origin (so that a node's index is its position).
+GridSpec UnitGrid(const std::array<int, 3>& dims, int band) {
+  GridSpec grid;
+  grid.dims = dims;
+  grid.voxel_m = 1.0;
+  grid.band_voxels = band;
+  return grid;
+}
 
 double NearestDistance(const std::vector<V3>& samples, const V3& p) {
   double best = 1e300;
@@ -159,10 +169,7 @@ TEST(FillSamplelessPockets, APocketStaysWhereNearbySamplesFaceIt) {
 
 // With no enclosed pocket the field is left as it was.
 TEST(FillSamplelessPockets, NothingEnclosedChangesNothing) {
-  GridSpec grid;
-  grid.dims = {40, 37, 35};
-  grid.voxel_m = 1.0;
-  grid.band_voxels = 4;
+  const GridSpec grid = UnitGrid({40, 37, 35}, 4);
   const V3 c(20, 18, 17);
   std::vector<float> dense(grid.NodeCount());
   for (int i = 0; i < grid.dims[0]; ++i)
@@ -180,10 +187,7 @@ TEST(FillSamplelessPockets, NothingEnclosedChangesNothing) {
 // 8^3 brick (its nodes 3.5 sqrt 3 = 6.1 voxels from the centre at most), which FromDense keeps
 // uniform (no node within the band of 2 voxels).
 TEST(FillSamplelessPockets, FillsAPocketThatHoldsAUniformBrick) {
-  GridSpec grid;
-  grid.dims = {56, 56, 56};
-  grid.voxel_m = 1.0;
-  grid.band_voxels = 2;
+  const GridSpec grid = UnitGrid({56, 56, 56}, 2);
   const V3 c(27.5, 27.5, 27.5);  // the centre of brick (3, 3, 3)
   std::vector<float> dense(grid.NodeCount());
   std::size_t pocket = 0;
@@ -214,6 +218,62 @@ TEST(FillSamplelessPockets, FillsAPocketThatHoldsAUniformBrick) {
         const double r = (V3(i, j, k) - c).norm();
         EXPECT_EQ(field.Value(i, j, k) <= 0.0f, r <= 20.0) << i << " " << j << " " << k;
       }
+}
+
+// A ball (radius 10) with three floating balls of radius 2 beside it: [0] 8 voxels from its
+// surface, no sample near; [1] with its own samples; [2] 5 voxels above a patch of samples
+// (a disc) whose normals point away from it (down) or towards it (up).
+TEST(CutSamplelessIslands, CutsOnlyTheIslandNoSampleBounds) {
+  const GridSpec grid = UnitGrid({70, 45, 43}, 4);
+  const V3 c(20, 22, 21);
+  const std::array<V3, 3> isl = {c + V3(20, 0, 0), c + V3(35, 10, 0), V3(50, 22, 33)};
+  std::vector<float> dense(grid.NodeCount());
+  std::array<std::size_t, 3> count{};
+  for (int i = 0; i < grid.dims[0]; ++i)
+    for (int j = 0; j < grid.dims[1]; ++j)
+      for (int k = 0; k < grid.dims[2]; ++k) {
+        const V3 p(i, j, k);
+        double phi = (p - c).norm() - 10.0;
+        for (std::size_t q = 0; q < isl.size(); ++q) {
+          phi = std::min(phi, (p - isl[q]).norm() - 2.0);
+          count[q] += (p - isl[q]).norm() <= 2.0 ? 1u : 0u;
+        }
+        dense[grid.Index(i, j, k)] = static_cast<float>(std::clamp(phi, -4.0, 4.0));
+      }
+  const auto cut = [&](bool disc_facing_island, double disc_spacing) {
+    std::vector<V3> samples, normals;
+    SphereSamples(c, 10.0, 1500, true, samples, normals);
+    std::vector<double> spacing(samples.size(), 2.0);
+    SphereSamples(isl[1], 2.0, 60, true, samples, normals);
+    // A disc of samples 5 voxels below island 2, in the plane z = 26.
+    for (int u = -4; u <= 4; ++u)
+      for (int v = -4; v <= 4; ++v) {
+        samples.push_back(V3(isl[2].x() + u, isl[2].y() + v, isl[2].z() - 7.0));
+        normals.push_back(V3(0, 0, disc_facing_island ? 1.0 : -1.0));
+      }
+    spacing.resize(samples.size(), disc_spacing);
+    SparseField field = SparseField::FromDense(grid, dense);
+    const PocketFill got = CutSamplelessIslands(field, samples, normals, spacing);
+    for (std::size_t q = 0; q < isl.size(); ++q) {
+      const Eigen::Vector3i n = isl[q].cast<int>();
+      EXPECT_EQ(field.Value(n.x(), n.y(), n.z()) > 0.0f,
+                q == 0 || (q == 2 && (disc_facing_island || disc_spacing < 5.0)))
+          << "island " << q;
+    }
+    // The big ball is untouched.
+    EXPECT_LE(field.Value(20, 22, 21), -4.0f);
+    return got;
+  };
+  // Facing the disc's samples (in front of them): cut; behind them within a spacing: kept.
+  const PocketFill facing = cut(true, 6.0);
+  EXPECT_EQ(facing.pockets, 2u);
+  EXPECT_EQ(facing.nodes, count[0] + count[2]);
+  const PocketFill behind = cut(false, 6.0);
+  EXPECT_EQ(behind.pockets, 1u);
+  EXPECT_EQ(behind.nodes, count[0]);
+  // Behind them but beyond their spacing (3 voxels; the island is 5 away): cut.
+  const PocketFill far_behind = cut(false, 3.0);
+  EXPECT_EQ(far_behind.pockets, 2u);
 }
 
 }  // namespace

@@ -382,6 +382,13 @@ int RunBuild(const BuildArgs& args) {
                "a cavity (a cavity's wall samples face into it)\n",
                args.points, built.hermite.pockets_filled, built.hermite.pockets_filled == 1 ? "" : "s",
                built.hermite.pocket_nodes_filled, built.hermite.pockets_filled == 1 ? "it" : "each", "it");
+  if (built.hermite.islands_cut > 0 && !args.quiet)
+    fmt::print(stderr,
+               "palpa build: note: {}: cut {} island{} of solid floating apart from the rest ({} nodes): {} lay more "
+               "than 3 voxels from every sample and in front of every sample within a spacing of {}, nothing any "
+               "sample shows\n",
+               args.points, built.hermite.islands_cut, built.hermite.islands_cut == 1 ? "" : "s",
+               built.hermite.island_nodes_cut, built.hermite.islands_cut == 1 ? "it" : "each", "it");
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
                "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; {}, so this "

@@ -1669,11 +1669,12 @@ struct SideRules {
 // is smooth, never a staircase of brick faces.
 // `tree` and `spacing` (SampleSpacing) are HermiteField's, over the same positions, and `sides`
 // was built from them. On a closed set with `hull_cut`, CutBeyondSampleHull follows the far pass;
-// on an open set with `smooth_closure`, SmoothClosure.
+// on an open set with `smooth_closure`, SmoothClosure; last, with `sampleless_components`,
+// FillSamplelessPockets and CutSamplelessIslands.
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                     const std::vector<V3>& guard_positions, const std::vector<V3>& guard_normals, const KdTree& tree,
                     const std::vector<double>& spacing, const SideRules& sides, bool hull_cut, bool smooth_closure,
-                    HermiteStats& st) {
+                    bool sampleless_components, HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -2244,9 +2245,13 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
     open_cut += local;
   });
   st.face_nodes_open = far_faces.load() + open_cut.load();
+  if (!sampleless_components) return;
   const PocketFill pockets = FillSamplelessPockets(field, positions, normals, spacing);
   st.pockets_filled = pockets.pockets;
   st.pocket_nodes_filled = pockets.nodes;
+  const PocketFill islands = CutSamplelessIslands(field, positions, normals, spacing);
+  st.islands_cut = islands.pockets;
+  st.island_nodes_cut = islands.nodes;
 }
 
 }  // namespace
@@ -2616,7 +2621,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
     LabelByWinding(field, positions, normals, guard_positions, guard_normals, tree, spacing, *sides, options.hull_cut,
-                   options.smooth_closure, st);
+                   options.smooth_closure, options.sampleless_components, st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }

@@ -1,8 +1,9 @@
-// Enclosed outside pockets that no sample bounds: palpa/field/pockets.h.
+// Enclosed outside pockets and floating inside islands that no sample bounds: palpa/field/pockets.h.
 #include "palpa/field/pockets.h"
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -32,10 +33,13 @@ using V3 = Eigen::Vector3d;
 // within a spacing of them has them behind it, 6.5-8.4 voxels deep.
 constexpr std::size_t kBoundNeighbours = 16;
 
-}  // namespace
-
-PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
-                                 const std::vector<double>& spacing, double reach_voxels, double reach_spacings) {
+// FillSamplelessPockets (`inside` false: outside pockets, filled) and CutSamplelessIslands (true:
+// inside islands, cut), one flood: "ours" is the side searched, the other side's uniform bricks
+// are walls. The outside is seeded at the grid faces, the inside at its nodes within
+// reach_voxels of a sample.
+PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>& positions,
+                         const std::vector<V3>& normals, const std::vector<double>& spacing, double reach_voxels,
+                         double reach_spacings) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -46,6 +50,9 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
   using Mask = std::array<std::uint64_t, kB>;
   constexpr std::uint64_t kByteLow = 0x0101010101010101ull;  // e = 0 in every row
   constexpr std::uint64_t kNotE0 = ~kByteLow, kNotE7 = ~(kByteLow << 7);
+  const std::int32_t kOurs = inside ? SparseField::kUniformInside : SparseField::kUniformOutside;
+  const std::int32_t kWall = inside ? SparseField::kUniformOutside : SparseField::kUniformInside;
+  const auto ours = [inside](float x) { return inside ? x <= 0.0f : x > 0.0f; };
   const auto& bd = field.brick_dims();
   const std::array<int, 3> dims = grid.dims;
   const std::size_t n_bricks =
@@ -86,7 +93,7 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
       const Mask grid_nodes = in_grid(field.BrickCoords(allocated[m]));
       for (std::size_t a = 0; a < out[m].size(); ++a) {
         std::uint64_t bits = 0;
-        for (std::size_t q = 0; q < 64; ++q) bits |= static_cast<std::uint64_t>(v[a * 64 + q] > 0.0f) << q;
+        for (std::size_t q = 0; q < 64; ++q) bits |= static_cast<std::uint64_t>(ours(v[a * 64 + q])) << q;
         out[m][a] = bits & grid_nodes[a];
       }
       full[m] = out[m] == grid_nodes ? 1 : 0;
@@ -104,8 +111,8 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
   // Adds `s` (nodes of brick b) to what the flood reached.
   const auto seed = [&](std::size_t b, const Mask& s) {
     const std::int32_t slot = field.Slot(b);
-    if (slot == SparseField::kUniformInside) return;
-    if (slot == SparseField::kUniformOutside) {
+    if (slot == kWall) return;
+    if (slot == kOurs) {
       if (uniform_reached[b] == 0 && !empty(s)) {
         uniform_reached[b] = 1;
         push(b);
@@ -121,39 +128,82 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
     }
     if (grew) push(b);
   };
-  for (int bi = 0; bi < bd[0]; ++bi)
-    for (int bj = 0; bj < bd[1]; ++bj)
-      for (int bk = 0; bk < bd[2]; ++bk) {
-        if (bi != 0 && bj != 0 && bk != 0 && bi != bd[0] - 1 && bj != bd[1] - 1 && bk != bd[2] - 1) continue;
-        const std::size_t b = field.BrickIndex(bi, bj, bk);
-        if (field.Slot(b) == SparseField::kUniformOutside) {
-          uniform_reached[b] = 1;
-          push(b);
-          continue;
+  if (!inside) {
+    for (int bi = 0; bi < bd[0]; ++bi)
+      for (int bj = 0; bj < bd[1]; ++bj)
+        for (int bk = 0; bk < bd[2]; ++bk) {
+          if (bi != 0 && bj != 0 && bk != 0 && bi != bd[0] - 1 && bj != bd[1] - 1 && bk != bd[2] - 1) continue;
+          const std::size_t b = field.BrickIndex(bi, bj, bk);
+          if (field.Slot(b) == kOurs) {
+            uniform_reached[b] = 1;
+            push(b);
+            continue;
+          }
+          if (field.Slot(b) == kWall) continue;
+          // The brick's nodes on a grid face: whole layers on the i faces, rows on the j faces, end
+          // bits on the k faces.
+          const std::array<int, 3> bc = {bi, bj, bk};
+          const auto [na, nc, ne] = extent(bc);
+          const Mask grid_nodes = in_grid(bc);
+          std::uint64_t sides = 0;
+          if (bj == 0) sides |= 0xFFull;
+          if (bj == bd[1] - 1) sides |= 0xFFull << (8 * (nc - 1));
+          if (bk == 0) sides |= kByteLow;
+          if (bk == bd[2] - 1) sides |= kByteLow << (ne - 1);
+          Mask face{};
+          for (int a = 0; a < na; ++a) {
+            const bool whole = (bi == 0 && a == 0) || (bi == bd[0] - 1 && a == na - 1);
+            face[static_cast<std::size_t>(a)] = grid_nodes[static_cast<std::size_t>(a)] & (whole ? ~0ull : sides);
+          }
+          seed(b, face);
         }
-        // The brick's nodes on a grid face: whole layers on the i faces, rows on the j faces, end
-        // bits on the k faces.
-        const std::array<int, 3> bc = {bi, bj, bk};
-        const auto [na, nc, ne] = extent(bc);
-        const Mask grid_nodes = in_grid(bc);
-        std::uint64_t sides = 0;
-        if (bj == 0) sides |= 0xFFull;
-        if (bj == bd[1] - 1) sides |= 0xFFull << (8 * (nc - 1));
-        if (bk == 0) sides |= kByteLow;
-        if (bk == bd[2] - 1) sides |= kByteLow << (ne - 1);
-        Mask face{};
-        for (int a = 0; a < na; ++a) {
-          const bool whole = (bi == 0 && a == 0) || (bi == bd[0] - 1 && a == na - 1);
-          face[static_cast<std::size_t>(a)] = grid_nodes[static_cast<std::size_t>(a)] & (whole ? ~0ull : sides);
+  } else {
+    // Every node within reach_voxels of a sample: a sphere of nodes about each one, as bits, in
+    // parallel (an OR into the allocated bricks' masks; a uniform brick is flagged whole).
+    const double r = reach_voxels, r2 = r * r;
+    std::vector<Mask> near(allocated.size(), Mask{});
+    std::vector<std::uint8_t> near_uniform(n_bricks, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 256), [&](const auto& range) {
+      for (std::size_t t = range.begin(); t != range.end(); ++t) {
+        const V3 g = (positions[t] - grid.origin_m) / h;
+        bool beside = true;  // within reach of the grid (a far sample's index would not fit an int)
+        for (std::size_t a = 0; a < 3; ++a) {
+          const double x = g[static_cast<Eigen::Index>(a)];
+          beside = beside && x >= -r && x <= dims[a] - 1 + r;
         }
-        seed(b, face);
+        if (!beside) continue;
+        std::array<int, 3> lo{}, hi{};
+        for (std::size_t a = 0; a < 3; ++a) {
+          lo[a] = std::max(0, static_cast<int>(std::ceil(g[static_cast<Eigen::Index>(a)] - r)));
+          hi[a] = std::min(dims[a] - 1, static_cast<int>(std::floor(g[static_cast<Eigen::Index>(a)] + r)));
+        }
+        for (int i = lo[0]; i <= hi[0]; ++i)
+          for (int j = lo[1]; j <= hi[1]; ++j)
+            for (int k = lo[2]; k <= hi[2]; ++k) {
+              if ((V3(i, j, k) - g).squaredNorm() > r2) continue;
+              const std::size_t b = field.BrickIndex(i / kB, j / kB, k / kB);
+              if (index[b] < 0) {
+                std::atomic_ref<std::uint8_t>(near_uniform[b]).store(1, std::memory_order_relaxed);
+                continue;
+              }
+              std::atomic_ref<std::uint64_t>(near[static_cast<std::size_t>(index[b])][static_cast<std::size_t>(i % kB)])
+                  .fetch_or(1ull << (j % kB * kB + k % kB), std::memory_order_relaxed);
+            }
       }
+    });
+    for (std::size_t b = 0; b < n_bricks; ++b) {
+      if (index[b] >= 0)
+        seed(b, near[static_cast<std::size_t>(index[b])]);
+      else if (near_uniform[b] != 0)
+        seed(b, in_grid(field.BrickCoords(b)));
+    }
+  }
   while (!work.empty()) {
     const std::size_t b = work.back();
     work.pop_back();
     queued[b] = 0;
     const std::array<int, 3> bc = field.BrickCoords(b);
-    const bool uniform = field.Slot(b) == SparseField::kUniformOutside;
+    const bool uniform = field.Slot(b) == kOurs;
     Mask r;
     if (uniform) {
       r = in_grid(bc);
@@ -191,8 +241,8 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
       if (nb[axis] < 0 || nb[axis] >= bd[axis]) continue;
       const std::size_t nbi = field.BrickIndex(nb[0], nb[1], nb[2]);
       const std::int32_t slot = field.Slot(nbi);
-      if (slot == SparseField::kUniformInside) continue;
-      if (slot == SparseField::kUniformOutside && (uniform_reached[nbi] != 0 || uniform)) {
+      if (slot == kWall) continue;
+      if (slot == kOurs && (uniform_reached[nbi] != 0 || uniform)) {
         // A uniform brick's face reaches all of the next brick's face (the grid's nodes on it).
         if (uniform_reached[nbi] == 0) {
           uniform_reached[nbi] = 1;
@@ -216,7 +266,7 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
   }
   // The enclosed outside nodes: masks for the unreached uniform outside bricks too.
   for (std::size_t b = 0; b < n_bricks; ++b)
-    if (field.Slot(b) == SparseField::kUniformOutside && uniform_reached[b] == 0) {
+    if (field.Slot(b) == kOurs && uniform_reached[b] == 0) {
       index[b] = static_cast<std::int32_t>(out.size());
       out.push_back(in_grid(field.BrickCoords(b)));
       reach.push_back(Mask{});
@@ -260,14 +310,16 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
     for (std::size_t m = 0; m < got; ++m) {
       const double d = std::sqrt(d2[m]);
       if (d <= reach_voxels * h) return true;
-      if (d <= reach_spacings * spacing[idx[m]] && (p - positions[idx[m]]).dot(normals[idx[m]]) > 0.0) return true;
+      const double front = (p - positions[idx[m]]).dot(normals[idx[m]]);
+      if (d <= reach_spacings * spacing[idx[m]] && (inside ? front < 0.0 : front > 0.0)) return true;
     }
     return false;
   };
-  const auto set_inside = [&](const Node& n, float value) {
+  // Gives node n the other side at depth (voxels, > 0), where deeper than its value.
+  const auto set_other = [&](const Node& n, float depth) {
     float* v = field.Allocate(field.BrickIndex(n[0] / kB, n[1] / kB, n[2] / kB));
     float& x = v[(n[0] % kB * kB + n[1] % kB) * kB + n[2] % kB];
-    x = std::min(x, value);
+    x = inside ? std::max(x, depth) : std::min(x, -depth);
   };
   const std::array<Node, 6> steps = {Node{-1, 0, 0}, Node{1, 0, 0},  Node{0, -1, 0},
                                      Node{0, 1, 0},  Node{0, 0, -1}, Node{0, 0, 1}};
@@ -296,7 +348,7 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
               for (const Node& s : steps) {
                 const Node nb = {n[0] + s[0], n[1] + s[1], n[2] + s[2]};
                 if (!within(nb)) continue;
-                if (field.Value(nb[0], nb[1], nb[2]) <= 0.0f) {
+                if (!ours(field.Value(nb[0], nb[1], nb[2]))) {
                   edge = true;
                 } else if (take(nb)) {
                   pocket.push_back(nb);
@@ -310,7 +362,7 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
             for (const Node& n : pocket) {
               double d = 0.0;
               nearest(n, &d);
-              set_inside(n, -std::min(band, std::max(1e-6f, static_cast<float>(d / h))));
+              set_other(n, std::min(band, std::max(1e-6f, static_cast<float>(d / h))));
             }
             filled.insert(filled.end(), pocket.begin(), pocket.end());
           }
@@ -333,15 +385,27 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& posi
         const Node nb = {n[0] + s[0], n[1] + s[1], n[2] + s[2]};
         if (!within(nb) || !seen.insert(key(nb)).second) continue;
         const float x = field.Value(nb[0], nb[1], nb[2]);
-        if (x > 0.0f || x <= -band) continue;
+        if (ours(x) || std::abs(x) >= band) continue;
         next.push_back(nb);
         double d = 0.0;
         nearest(nb, &d);
-        if (d > reach_voxels * h) set_inside(nb, -std::min(band, static_cast<float>(d / h)));
+        if (d > reach_voxels * h) set_other(nb, std::min(band, static_cast<float>(d / h)));
       }
     std::swap(front, next);
   }
   return {pockets, filled.size()};
+}
+
+}  // namespace
+
+PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                 const std::vector<double>& spacing, double reach_voxels, double reach_spacings) {
+  return FillUnbounded(field, false, positions, normals, spacing, reach_voxels, reach_spacings);
+}
+
+PocketFill CutSamplelessIslands(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                const std::vector<double>& spacing, double reach_voxels, double reach_spacings) {
+  return FillUnbounded(field, true, positions, normals, spacing, reach_voxels, reach_spacings);
 }
 
 }  // namespace palpa::field

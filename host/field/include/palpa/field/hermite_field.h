@@ -89,6 +89,10 @@ struct HermiteOptions {
   // decides those nodes one by one and left an unscanned side's closure ragged (spikes, notches,
   // floating specks of solid, pockets). Off only to measure what it prevents.
   bool smooth_closure = true;
+  // Outside pockets enclosed in the solid and inside islands apart from the rest that no sample
+  // bounds are filled and cut, last (HermiteStats::pockets_filled, islands_cut; pockets.h). Off
+  // only to measure what it prevents.
+  bool sampleless_components = true;
   // > 0 (metres): before any node is evaluated, find whether an open scan's closure goes on past
   // the grid, within this reach of the grid's box, with the winding number and closing rule the
   // labelling uses (HermiteStats::closure_beyond_grid). If it does, HermiteField returns at once
@@ -139,6 +143,10 @@ struct HermiteStats {
   // pockets that no sample bounds).
   std::size_t pockets_filled = 0;
   std::size_t pocket_nodes_filled = 0;
+  // Inside islands that no sample within 3 voxels or 1 spacing bounds, cut (set outside), and
+  // their nodes: solid floating where nothing was scanned (CutSamplelessIslands).
+  std::size_t islands_cut = 0;
+  std::size_t island_nodes_cut = 0;
   std::size_t face_nodes_closed = 0;  // inside nodes on a grid face set outside
   std::size_t face_nodes_open = 0;    // of which no sample near faces that grid face: an open side's
   // Area of the w = 1/2 surface in the bricks no sample reaches (winding_bricks), m^2: what the

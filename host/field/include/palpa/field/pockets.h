@@ -1,5 +1,6 @@
-// Enclosed outside pockets that no sample bounds (issue 20): hollows that a field's side rules
-// leave inside a closure, far from every sample. Host only.
+// Enclosed outside pockets and floating inside islands that no sample bounds (issue 20): hollows
+// and specks that a field's side rules leave in a closure or the air, far from every sample.
+// Host only.
 #pragma once
 
 #include <cstddef>
@@ -12,8 +13,8 @@
 namespace palpa::field {
 
 struct PocketFill {
-  std::size_t pockets = 0;  // pockets filled
-  std::size_t nodes = 0;    // their nodes, set inside
+  std::size_t pockets = 0;  // pockets filled (islands cut)
+  std::size_t nodes = 0;    // their nodes, set to the other side
 };
 
 // Fills every outside pocket of `field` that no sample bounds, and returns what it filled.
@@ -36,9 +37,23 @@ struct PocketFill {
 // Cost: a flood fill from the faces over 8-node rows of each allocated brick (a uniform outside
 // brick is one unit), O(allocated bricks) and no sample search when nothing is enclosed; each
 // enclosed node is visited once, the samples' k-d tree built only then. Deterministic.
-// docs/field-methods.md § Enclosed pockets that no sample bounds.
+// docs/field-methods.md § Enclosed pockets and floating islands that no sample bounds.
 PocketFill FillSamplelessPockets(SparseField& field, const std::vector<Eigen::Vector3d>& positions,
                                  const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& spacing,
                                  double reach_voxels = 3.0, double reach_spacings = 1.0);
+
+// The same for the inside: cuts every island of `field` that no sample bounds, and returns what it
+// cut. An island is a 6-connected set of inside nodes (phi <= 0) none of which lies within
+// reach_voxels voxels of a sample (the inside is flooded from its nodes that do). A sample bounds
+// it at a node with an outside axis neighbour when it lies within reach_spacings x its own spacing
+// with the node behind it ((node - sample) . normal < 0). An island that no sample bounds is
+// solid floating where nothing was scanned (a speck the side rules left in the air, a piece of a
+// closure cut off); its nodes take their distance to the nearest sample (voxels, at least 1e-6,
+// clamped to the band), and so does an outside node (below +band) within a band's steps of it
+// farther than reach_voxels from every sample, where that is larger. Same arguments, units and
+// cost as FillSamplelessPockets, plus a sphere of nodes about each sample for the flood's seeds.
+PocketFill CutSamplelessIslands(SparseField& field, const std::vector<Eigen::Vector3d>& positions,
+                                const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& spacing,
+                                double reach_voxels = 3.0, double reach_spacings = 1.0);
 
 }  // namespace palpa::field
