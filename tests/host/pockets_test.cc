@@ -126,7 +126,7 @@ TEST(FillSamplelessPockets, FillsOnlyTheEnclosedPocketNoSampleBounds) {
           EXPECT_EQ(after, before) << i << " " << j << " " << k;
         }
       }
-  EXPECT_EQ(filled.pockets, 1u);
+  EXPECT_EQ(filled.components, 1u);
   EXPECT_EQ(filled.nodes, pocket0);
   EXPECT_GT(pocket0, 400u);  // 4/3 pi 5^3 = 524
 }
@@ -153,17 +153,17 @@ TEST(FillSamplelessPockets, APocketStaysWhereNearbySamplesFaceIt) {
     const PocketFill filled = FillSamplelessPockets(field, samples, normals, spacing);
     // Pocket 3's centre: outside while kept, inside once filled.
     const Eigen::Vector3i c = solid.pocket_centre[3].cast<int>();
-    EXPECT_EQ(field.Value(c.x(), c.y(), c.z()) <= 0.0f, filled.pockets == 2u);
+    EXPECT_EQ(field.Value(c.x(), c.y(), c.z()) <= 0.0f, filled.components == 2u);
     return filled;
   };
   const PocketFill faced = fill(true, 6.0);
-  EXPECT_EQ(faced.pockets, 1u);
+  EXPECT_EQ(faced.components, 1u);
   EXPECT_EQ(faced.nodes, in0);
   const PocketFill turned = fill(false, 6.0);
-  EXPECT_EQ(turned.pockets, 2u);
+  EXPECT_EQ(turned.components, 2u);
   EXPECT_EQ(turned.nodes, in0 + in3);
   const PocketFill near_spaced = fill(true, 3.5);
-  EXPECT_EQ(near_spaced.pockets, 2u);
+  EXPECT_EQ(near_spaced.components, 2u);
   EXPECT_EQ(near_spaced.nodes, in0 + in3);
 }
 
@@ -178,7 +178,7 @@ TEST(FillSamplelessPockets, NothingEnclosedChangesNothing) {
         dense[grid.Index(i, j, k)] = static_cast<float>(std::clamp((V3(i, j, k) - c).norm() - 12.0, -4.0, 4.0));
   SparseField field = SparseField::FromDense(grid, dense);
   const PocketFill filled = FillSamplelessPockets(field, {}, {}, {});
-  EXPECT_EQ(filled.pockets, 0u);
+  EXPECT_EQ(filled.components, 0u);
   EXPECT_EQ(filled.nodes, 0u);
   EXPECT_EQ(field.ToDense(), SparseField::FromDense(grid, dense).ToDense());
 }
@@ -210,7 +210,7 @@ TEST(FillSamplelessPockets, FillsAPocketThatHoldsAUniformBrick) {
   std::vector<V3> samples, normals;
   SphereSamples(c, 20.0, 3000, true, samples, normals);
   const PocketFill filled = FillSamplelessPockets(field, samples, normals, std::vector<double>(samples.size(), 1.0));
-  EXPECT_EQ(filled.pockets, 1u);
+  EXPECT_EQ(filled.components, 1u);
   EXPECT_EQ(filled.nodes, pocket);
   for (int i = 0; i < 56; ++i)
     for (int j = 0; j < 56; ++j)
@@ -266,14 +266,14 @@ TEST(CutSamplelessIslands, CutsOnlyTheIslandNoSampleBounds) {
   };
   // Facing the disc's samples (in front of them): cut; behind them within a spacing: kept.
   const PocketFill facing = cut(true, 6.0);
-  EXPECT_EQ(facing.pockets, 2u);
+  EXPECT_EQ(facing.components, 2u);
   EXPECT_EQ(facing.nodes, count[0] + count[2]);
   const PocketFill behind = cut(false, 6.0);
-  EXPECT_EQ(behind.pockets, 1u);
+  EXPECT_EQ(behind.components, 1u);
   EXPECT_EQ(behind.nodes, count[0]);
   // Behind them but beyond their spacing (3 voxels; the island is 5 away): cut.
   const PocketFill far_behind = cut(false, 3.0);
-  EXPECT_EQ(far_behind.pockets, 2u);
+  EXPECT_EQ(far_behind.components, 2u);
 }
 
 }  // namespace

@@ -375,20 +375,22 @@ int RunBuild(const BuildArgs& args) {
                "the samples' convex hull (a part carried on past its last samples, such as an unsampled end) and were "
                "set outside\n",
                args.points, built.hermite.hull_cut_nodes, built.hermite.hull_cut_beyond_m * 1e3);
-  if (built.hermite.pockets_filled > 0 && !args.quiet)
+  // Pockets filled and islands cut (FillSamplelessPockets, CutSamplelessIslands): one sentence
+  // each, what was changed and why the samples do not show it.
+  const auto sampleless_note = [&](std::size_t count, std::size_t nodes, const char* done, const char* what,
+                                   const char* where, const char* why) {
+    if (count == 0 || args.quiet) return;
     fmt::print(stderr,
-               "palpa build: note: {}: filled {} hollow{} enclosed in the solid ({} nodes): {} lay more than 3 voxels "
-               "from every sample and behind every sample within a spacing of {}, a gap the closure left rather than "
-               "a cavity (a cavity's wall samples face into it)\n",
-               args.points, built.hermite.pockets_filled, built.hermite.pockets_filled == 1 ? "" : "s",
-               built.hermite.pocket_nodes_filled, built.hermite.pockets_filled == 1 ? "it" : "each", "it");
-  if (built.hermite.islands_cut > 0 && !args.quiet)
-    fmt::print(stderr,
-               "palpa build: note: {}: cut {} island{} of solid floating apart from the rest ({} nodes): {} lay more "
-               "than 3 voxels from every sample and in front of every sample within a spacing of {}, nothing any "
-               "sample shows\n",
-               args.points, built.hermite.islands_cut, built.hermite.islands_cut == 1 ? "" : "s",
-               built.hermite.island_nodes_cut, built.hermite.islands_cut == 1 ? "it" : "each", "it");
+               "palpa build: note: {}: {} {} {}{} {} ({} nodes): {} lay more than 3 voxels from every sample and {}\n",
+               args.points, done, count, what, count == 1 ? "" : "s", where, nodes, count == 1 ? "it" : "each", why);
+  };
+  sampleless_note(built.hermite.pockets_filled, built.hermite.pocket_nodes_filled, "filled", "hollow",
+                  "enclosed in the solid",
+                  "behind every sample within a spacing of it, a gap the closure left rather than a cavity (a "
+                  "cavity's wall samples face into it)");
+  sampleless_note(built.hermite.islands_cut, built.hermite.island_nodes_cut, "cut", "island",
+                  "of solid floating apart from the rest",
+                  "in front of every sample within a spacing of it, nothing any sample shows");
   if (!open_scan && built.hermite.face_nodes_closed > 0)
     fmt::print(stderr,
                "palpa build: note: {}: the field's inside reached the grid faces at {} nodes, set outside; {}, so this "

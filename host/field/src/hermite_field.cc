@@ -2247,10 +2247,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   st.face_nodes_open = far_faces.load() + open_cut.load();
   if (!sampleless_components) return;
   const PocketFill pockets = FillSamplelessPockets(field, positions, normals, spacing);
-  st.pockets_filled = pockets.pockets;
+  st.pockets_filled = pockets.components;
   st.pocket_nodes_filled = pockets.nodes;
   const PocketFill islands = CutSamplelessIslands(field, positions, normals, spacing);
-  st.islands_cut = islands.pockets;
+  st.islands_cut = islands.components;
   st.island_nodes_cut = islands.nodes;
 }
 

@@ -74,32 +74,32 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
   const auto empty = [](const Mask& m) {
     return std::all_of(m.begin(), m.end(), [](std::uint64_t x) { return x == 0; });
   };
-  // Masks of allocated bricks (and later of unreached uniform outside ones): outside nodes, and
+  // Masks of allocated bricks (and later of our unreached uniform ones): our side's nodes, and
   // those the flood reached.
   std::vector<std::int32_t> index(n_bricks, -1);
-  std::vector<Mask> out, reach;
-  std::vector<std::uint8_t> full;  // per allocated brick: every grid node outside
+  std::vector<Mask> side, reach;
+  std::vector<std::uint8_t> full;  // per allocated brick: every grid node on our side
   std::vector<std::size_t> allocated;
   for (std::size_t b = 0; b < n_bricks; ++b)
     if (field.BrickValues(b) != nullptr) {
       index[b] = static_cast<std::int32_t>(allocated.size());
       allocated.push_back(b);
     }
-  out.resize(allocated.size());
+  side.resize(allocated.size());
   full.resize(allocated.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, allocated.size(), 64), [&](const auto& range) {
     for (std::size_t m = range.begin(); m != range.end(); ++m) {
       const float* v = field.BrickValues(allocated[m]);
       const Mask grid_nodes = in_grid(field.BrickCoords(allocated[m]));
-      for (std::size_t a = 0; a < out[m].size(); ++a) {
+      for (std::size_t a = 0; a < side[m].size(); ++a) {
         std::uint64_t bits = 0;
         for (std::size_t q = 0; q < 64; ++q) bits |= static_cast<std::uint64_t>(ours(v[a * 64 + q])) << q;
-        out[m][a] = bits & grid_nodes[a];
+        side[m][a] = bits & grid_nodes[a];
       }
-      full[m] = out[m] == grid_nodes ? 1 : 0;
+      full[m] = side[m] == grid_nodes ? 1 : 0;
     }
   });
-  reach.assign(out.size(), Mask{});
+  reach.assign(side.size(), Mask{});
   std::vector<std::uint8_t> uniform_reached(n_bricks, 0), queued(n_bricks, 0);
   std::vector<std::size_t> work;
   const auto push = [&](std::size_t b) {
@@ -122,7 +122,7 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
     const auto m = static_cast<std::size_t>(index[b]);
     bool grew = false;
     for (std::size_t a = 0; a < s.size(); ++a) {
-      const std::uint64_t add = s[a] & out[m][a] & ~reach[m][a];
+      const std::uint64_t add = s[a] & side[m][a] & ~reach[m][a];
       reach[m][a] |= add;
       grew = grew || add != 0;
     }
@@ -209,11 +209,11 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
       r = in_grid(bc);
     } else {
       const auto m = static_cast<std::size_t>(index[b]);
-      const Mask& o = out[m];
+      const Mask& o = side[m];
       if (full[m] != 0) {
-        r = o;  // all outside: reached whole (most of a band's outer bricks)
+        r = o;  // all ours: reached whole (for the outside, most of a band's outer bricks)
       } else {
-        // Dilated by one node a step (every layer at once), masked to the outside nodes, to the
+        // Dilated by one node a step (every layer at once), masked to our side's nodes, to the
         // fixed point: as many steps as the flood's depth in the brick.
         r = reach[m];
         for (bool changed = true; changed;) {
@@ -264,18 +264,18 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
       seed(nbi, s);
     }
   }
-  // The enclosed outside nodes: masks for the unreached uniform outside bricks too.
+  // Our nodes the flood did not reach: masks for our unreached uniform bricks too.
   for (std::size_t b = 0; b < n_bricks; ++b)
     if (field.Slot(b) == kOurs && uniform_reached[b] == 0) {
-      index[b] = static_cast<std::int32_t>(out.size());
-      out.push_back(in_grid(field.BrickCoords(b)));
+      index[b] = static_cast<std::int32_t>(side.size());
+      side.push_back(in_grid(field.BrickCoords(b)));
       reach.push_back(Mask{});
     }
-  std::vector<Mask>& enclosed = out;  // out & ~reach, cleared node by node as the pockets are visited
+  std::vector<Mask>& enclosed = side;  // side & ~reach, cleared node by node as the pockets are visited
   bool any = false;
-  for (std::size_t m = 0; m < out.size(); ++m)
-    for (std::size_t a = 0; a < out[m].size(); ++a) {
-      enclosed[m][a] = out[m][a] & ~reach[m][a];
+  for (std::size_t m = 0; m < side.size(); ++m)
+    for (std::size_t a = 0; a < side[m].size(); ++a) {
+      enclosed[m][a] = side[m][a] & ~reach[m][a];
       any = any || enclosed[m][a] != 0;
     }
   if (!any || positions.empty()) return {};
@@ -300,8 +300,9 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
     *d = std::sqrt(d2);
     return idx;
   };
-  // Does a sample bound the pocket at its node n beside an inside node: a sample within
-  // reach_voxels, or one within reach_spacings of its spacing that n lies in front of?
+  // Does a sample bound the component at its node n beside the other side: a sample within
+  // reach_voxels, or one within reach_spacings of its spacing that says n is on our side (n in
+  // front of it for the outside, behind it for the inside)?
   const auto bounds = [&](const Node& n) {
     const V3 p = grid.Node(n[0], n[1], n[2]);
     std::array<std::size_t, kBoundNeighbours> idx{};
@@ -327,7 +328,7 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
     return n[0] >= 0 && n[1] >= 0 && n[2] >= 0 && n[0] < dims[0] && n[1] < dims[1] && n[2] < dims[2];
   };
   std::vector<Node> filled, pocket, stack;
-  std::size_t pockets = 0;
+  std::size_t components = 0;
   for (int bi = 0; bi < bd[0]; ++bi)
     for (int bj = 0; bj < bd[1]; ++bj)
       for (int bk = 0; bk < bd[2]; ++bk) {
@@ -358,7 +359,7 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
               if (edge && !bounded && bounds(n)) bounded = true;
             }
             if (bounded) continue;
-            ++pockets;
+            ++components;
             for (const Node& n : pocket) {
               double d = 0.0;
               nearest(n, &d);
@@ -368,7 +369,7 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
           }
       }
   if (filled.empty()) return {};
-  // The inside nodes within a band's steps of the filled pockets, breadth first.
+  // The other side's nodes within a band's steps of the changed components, breadth first.
   const int ring = static_cast<int>(std::ceil(band));
   std::unordered_set<std::size_t> seen;
   const auto key = [&](const Node& n) {
@@ -393,7 +394,7 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
       }
     std::swap(front, next);
   }
-  return {pockets, filled.size()};
+  return {components, filled.size()};
 }
 
 }  // namespace

@@ -13,8 +13,8 @@
 namespace palpa::field {
 
 struct PocketFill {
-  std::size_t pockets = 0;  // pockets filled (islands cut)
-  std::size_t nodes = 0;    // their nodes, set to the other side
+  std::size_t components = 0;  // pockets filled, or islands cut
+  std::size_t nodes = 0;       // their nodes, set to the other side
 };
 
 // Fills every outside pocket of `field` that no sample bounds, and returns what it filled.
