@@ -25,8 +25,8 @@
 #include "palpa/field/box_nearest.h"
 #include "palpa/field/convex_hull.h"
 #include "palpa/field/index_order.h"
-#include "palpa/field/pockets.h"
 #include "palpa/field/winding.h"
+#include "pockets_internal.h"
 #include "point_cloud.h"
 
 namespace palpa::field {
@@ -2246,10 +2246,10 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
   });
   st.face_nodes_open = far_faces.load() + open_cut.load();
   if (!sampleless_components) return;
-  const PocketFill pockets = FillSamplelessPockets(field, positions, normals, spacing);
+  const PocketFill pockets = detail::FillSamplelessPockets(field, positions, normals, spacing, wide);
   st.pockets_filled = pockets.components;
   st.pocket_nodes_filled = pockets.nodes;
-  const PocketFill islands = CutSamplelessIslands(field, positions, normals, spacing);
+  const PocketFill islands = detail::CutSamplelessIslands(field, positions, normals, spacing, wide);
   st.islands_cut = islands.components;
   st.island_nodes_cut = islands.nodes;
 }

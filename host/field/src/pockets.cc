@@ -7,7 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <unordered_set>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -15,6 +15,7 @@
 #include <tbb/parallel_for.h>
 #include <nanoflann.hpp>
 
+#include "pockets_internal.h"
 #include "point_cloud.h"
 
 namespace palpa::field {
@@ -36,10 +37,11 @@ constexpr std::size_t kBoundNeighbours = 16;
 // FillSamplelessPockets (`inside` false: outside pockets, filled) and CutSamplelessIslands (true:
 // inside islands, cut), one flood: "ours" is the side searched, the other side's uniform bricks
 // are walls. The outside is seeded at the grid faces, the inside at its nodes within
-// reach_voxels of a sample.
+// reach_voxels of a sample. `tree`: a k-d tree over `positions`, or null to build one only when
+// something is enclosed.
 PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>& positions,
-                         const std::vector<V3>& normals, const std::vector<double>& spacing, double reach_voxels,
-                         double reach_spacings) {
+                         const std::vector<V3>& normals, const std::vector<double>& spacing, const detail::KdTree* tree,
+                         double reach_voxels, double reach_spacings) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
@@ -280,7 +282,9 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
     }
   if (!any || positions.empty()) return {};
   const detail::PointCloud cloud{&positions};
-  const detail::KdTree wide(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
+  std::optional<detail::KdTree> own;
+  if (tree == nullptr) tree = &own.emplace(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(detail::kRangeLeaf));
+  const detail::KdTree& wide = *tree;
 
   using Node = std::array<int, 3>;
   const auto take = [&](const Node& n) {
@@ -369,22 +373,31 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
           }
       }
   if (filled.empty()) return {};
-  // The other side's nodes within a band's steps of the changed components, breadth first.
+  // The other side's nodes within a band's steps of the changed components, breadth first; a bit
+  // per grid node marks those seen (a changed component's nodes first).
   const int ring = static_cast<int>(std::ceil(band));
-  std::unordered_set<std::size_t> seen;
-  const auto key = [&](const Node& n) {
-    return (static_cast<std::size_t>(n[0]) * static_cast<std::size_t>(dims[1]) + static_cast<std::size_t>(n[1])) *
-               static_cast<std::size_t>(dims[2]) +
-           static_cast<std::size_t>(n[2]);
+  std::vector<std::uint64_t> seen(
+      (static_cast<std::size_t>(dims[0]) * static_cast<std::size_t>(dims[1]) * static_cast<std::size_t>(dims[2]) + 63) /
+          64,
+      0);
+  const auto first_visit = [&](const Node& n) {
+    const std::size_t key =
+        (static_cast<std::size_t>(n[0]) * static_cast<std::size_t>(dims[1]) + static_cast<std::size_t>(n[1])) *
+            static_cast<std::size_t>(dims[2]) +
+        static_cast<std::size_t>(n[2]);
+    const std::uint64_t bit = 1ull << (key % 64);
+    if ((seen[key / 64] & bit) != 0) return false;
+    seen[key / 64] |= bit;
+    return true;
   };
-  for (const Node& n : filled) seen.insert(key(n));
+  for (const Node& n : filled) first_visit(n);
   std::vector<Node> front = filled, next;
   for (int step = 0; step < ring && !front.empty(); ++step) {
     next.clear();
     for (const Node& n : front)
       for (const Node& s : steps) {
         const Node nb = {n[0] + s[0], n[1] + s[1], n[2] + s[2]};
-        if (!within(nb) || !seen.insert(key(nb)).second) continue;
+        if (!within(nb) || !first_visit(nb)) continue;
         const float x = field.Value(nb[0], nb[1], nb[2]);
         if (ours(x) || std::abs(x) >= band) continue;
         next.push_back(nb);
@@ -401,12 +414,26 @@ PocketFill FillUnbounded(SparseField& field, bool inside, const std::vector<V3>&
 
 PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                                  const std::vector<double>& spacing, double reach_voxels, double reach_spacings) {
-  return FillUnbounded(field, false, positions, normals, spacing, reach_voxels, reach_spacings);
+  return FillUnbounded(field, false, positions, normals, spacing, nullptr, reach_voxels, reach_spacings);
 }
 
 PocketFill CutSamplelessIslands(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                                 const std::vector<double>& spacing, double reach_voxels, double reach_spacings) {
-  return FillUnbounded(field, true, positions, normals, spacing, reach_voxels, reach_spacings);
+  return FillUnbounded(field, true, positions, normals, spacing, nullptr, reach_voxels, reach_spacings);
 }
+
+namespace detail {
+
+PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                 const std::vector<double>& spacing, const KdTree& tree) {
+  return FillUnbounded(field, false, positions, normals, spacing, &tree, 3.0, 1.0);
+}
+
+PocketFill CutSamplelessIslands(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
+                                const std::vector<double>& spacing, const KdTree& tree) {
+  return FillUnbounded(field, true, positions, normals, spacing, &tree, 3.0, 1.0);
+}
+
+}  // namespace detail
 
 }  // namespace palpa::field
