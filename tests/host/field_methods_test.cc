@@ -1104,14 +1104,8 @@ TEST(Winding, StripsAcrossAnOpenSideCloseBehindThem) {
 // cube-meshed, unseen, seed 48: 21,960 far-wrong, 6 voxels deep); scaled, 1,452.
 TEST(Winding, RangeScanRimSamplesAreasDoNotLiftTheOpenSidesClosure) {
   constexpr double a = 0.02;
-  mesh::TriangleMesh cube;
-  for (int c = 0; c < 8; ++c)
-    cube.vertices.emplace_back((c & 1) != 0 ? a : -a, (c & 2) != 0 ? a : -a, (c & 4) != 0 ? a : -a);
-  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& q : quads) {
-    cube.faces.push_back({q[0], q[1], q[2]});
-    cube.faces.push_back({q[0], q[2], q[3]});
-  }
+  mesh::TriangleMesh cube = UnitCube();
+  for (Eigen::Vector3d& v : cube.vertices) v *= 2.0 * a;  // [-a, a]^3, exactly
   std::size_t phantom_total = 0;
   for (const std::uint64_t draw : {1u, 2u, 3u}) {
     const auto scan = mesh::RangeScan(cube, 5000, 6, 0.0, draw);
