@@ -426,12 +426,12 @@ namespace detail {
 
 PocketFill FillSamplelessPockets(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                                  const std::vector<double>& spacing, const KdTree& tree) {
-  return FillUnbounded(field, false, positions, normals, spacing, &tree, 3.0, 1.0);
+  return FillUnbounded(field, false, positions, normals, spacing, &tree, kPocketReachVoxels, kPocketReachSpacings);
 }
 
 PocketFill CutSamplelessIslands(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                                 const std::vector<double>& spacing, const KdTree& tree) {
-  return FillUnbounded(field, true, positions, normals, spacing, &tree, 3.0, 1.0);
+  return FillUnbounded(field, true, positions, normals, spacing, &tree, kPocketReachVoxels, kPocketReachSpacings);
 }
 
 }  // namespace detail

@@ -1,5 +1,5 @@
 // FillSamplelessPockets and CutSamplelessIslands on a k-d tree the caller already holds over the
-// same samples (HermiteField's), with the public reaches (3 voxels, 1 spacing). Host only.
+// same samples (HermiteField's), with the default reaches (kPocketReachVoxels, kPocketReachSpacings). Host only.
 #pragma once
 
 #include <vector>

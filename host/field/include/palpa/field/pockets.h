@@ -12,6 +12,11 @@
 
 namespace palpa::field {
 
+// The default reaches of both passes below: a sample bounds a component within this many voxels,
+// or within this many of its own spacings on the component's side.
+inline constexpr double kPocketReachVoxels = 3.0;
+inline constexpr double kPocketReachSpacings = 1.0;
+
 struct PocketFill {
   std::size_t components = 0;  // pockets filled, or islands cut
   std::size_t nodes = 0;       // their nodes, set to the other side
@@ -40,7 +45,8 @@ struct PocketFill {
 // docs/field-methods.md § Enclosed pockets and floating islands that no sample bounds.
 PocketFill FillSamplelessPockets(SparseField& field, const std::vector<Eigen::Vector3d>& positions,
                                  const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& spacing,
-                                 double reach_voxels = 3.0, double reach_spacings = 1.0);
+                                 double reach_voxels = kPocketReachVoxels,
+                                 double reach_spacings = kPocketReachSpacings);
 
 // The same for the inside: cuts every island of `field` that no sample bounds, and returns what it
 // cut. An island is a 6-connected set of inside nodes (phi <= 0) none of which lies within
@@ -54,6 +60,6 @@ PocketFill FillSamplelessPockets(SparseField& field, const std::vector<Eigen::Ve
 // cost as FillSamplelessPockets, plus a sphere of nodes about each sample for the flood's seeds.
 PocketFill CutSamplelessIslands(SparseField& field, const std::vector<Eigen::Vector3d>& positions,
                                 const std::vector<Eigen::Vector3d>& normals, const std::vector<double>& spacing,
-                                double reach_voxels = 3.0, double reach_spacings = 1.0);
+                                double reach_voxels = kPocketReachVoxels, double reach_spacings = kPocketReachSpacings);
 
 }  // namespace palpa::field
