@@ -65,6 +65,17 @@ Case Build(const PointSet& model, int cells, FieldMethod method, bool leak_guard
   return Case{std::move(*built), fit};
 }
 
+// The same device samples built with one of `options`' passes off, then on: what the pass changes.
+struct OffOn {
+  std::expected<BuildResult, Error> off, on;
+};
+OffOn BuildOffOn(const PointSet& device, BuildOptions options, bool BuildOptions::*pass) {
+  options.*pass = false;
+  auto off = BuildField(device.positions, device.normals, options);
+  options.*pass = true;
+  return {std::move(off), BuildField(device.positions, device.normals, options)};
+}
+
 // The samples an open scan from above keeps (bench/field/robustness.py's open-scan row): those
 // whose normal points away from +z by less than 100 degrees.
 PointSet OpenScan(const PointSet& all) {
@@ -815,10 +826,7 @@ TEST(HullCut, TakesExactlyTheInsideNodesBeyondTheThreshold) {
   for (const int cells : {100, 150, 230}) {
     BuildOptions options;
     options.grid.cells = cells;
-    options.hull_cut = false;
-    const auto without = BuildField(device.positions, device.normals, options);
-    options.hull_cut = true;
-    const auto with = BuildField(device.positions, device.normals, options);
+    const auto [without, with] = BuildOffOn(device, options, &BuildOptions::hull_cut);
     ASSERT_TRUE(without.has_value() && with.has_value());
     const GridSpec& g = with->field.grid();
     const double beyond = with->hermite.hull_cut_beyond_m;
@@ -1470,10 +1478,7 @@ TEST(Winding, OpenScanClosureIsSmoothedBeyondTheSamples) {
   BuildOptions options;
   options.grid.cells = 150;
   options.sampleless_components = false;  // the vote alone (they would remove the rough pieces too)
-  options.smooth_closure = false;
-  auto without = BuildField(device.positions, device.normals, options);
-  options.smooth_closure = true;
-  auto with = BuildField(device.positions, device.normals, options);
+  auto [without, with] = BuildOffOn(device, options, &BuildOptions::smooth_closure);
   ASSERT_TRUE(without.has_value() && with.has_value());
   const Components before = CountComponents(without->field), after = CountComponents(with->field);
   const mesh::EvalResult r_before = Score(Case{std::move(*without), fit}, mesh::Truth::Mesh(*m), "knot1 open, rough");
@@ -1512,10 +1517,7 @@ TEST(Winding, RealScansHollowsInItsClosureAreFilled) {
   const PointSet device = ApplyTransform(FitTransform(*pts, 0.06), *pts);
   BuildOptions options;
   options.grid.cells = 300;
-  options.sampleless_components = false;
-  auto kept = BuildField(device.positions, device.normals, options);
-  options.sampleless_components = true;
-  auto filled = BuildField(device.positions, device.normals, options);
+  const auto [kept, filled] = BuildOffOn(device, options, &BuildOptions::sampleless_components);
   ASSERT_TRUE(kept.has_value() && filled.has_value());
   const Components before = CountComponents(kept->field), after = CountComponents(filled->field);
   std::printf("[ oni, 300 cells ] outside components %zu (pocket nodes %zu) -> %zu (%zu); filled %zu pockets\n",

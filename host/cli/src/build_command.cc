@@ -18,6 +18,7 @@
 #include "palpa/field/build.h"
 #include "palpa/field/coverage.h"
 #include "palpa/field/normals.h"
+#include "palpa/field/pockets.h"
 #include "palpa/field/point_io.h"
 #include "palpa/field/samples.h"
 #include "palpa/field/to_blob.h"
@@ -381,8 +382,9 @@ int RunBuild(const BuildArgs& args) {
                                    const char* where, const char* why) {
     if (count == 0 || args.quiet) return;
     fmt::print(stderr,
-               "palpa build: note: {}: {} {} {}{} {} ({} nodes): {} lay more than 3 voxels from every sample and {}\n",
-               args.points, done, count, what, count == 1 ? "" : "s", where, nodes, count == 1 ? "it" : "each", why);
+               "palpa build: note: {}: {} {} {}{} {} ({} nodes): {} lay more than {} voxels from every sample and {}\n",
+               args.points, done, count, what, count == 1 ? "" : "s", where, nodes, count == 1 ? "it" : "each",
+               field::kPocketReachVoxels, why);
   };
   sampleless_note(built.hermite.pockets_filled, built.hermite.pocket_nodes_filled, "filled", "hollow",
                   "enclosed in the solid",

@@ -137,10 +137,10 @@ struct HermiteStats {
   // set outside (a part the estimate carried past its last samples).
   std::size_t hull_cut_nodes = 0;
   double hull_cut_beyond_m = 0.0;
-  // Enclosed outside pockets (no path of outside nodes to a grid face) whose zero surface lies
-  // farther than max(3 voxels, 2 sample spacings) from every sample, filled (set inside), and
-  // their nodes: hollows a closure left, which no sample shows (docs/field-methods.md § Enclosed
-  // pockets that no sample bounds).
+  // Enclosed outside pockets (no path of outside nodes to a grid face) that no sample bounds
+  // (FillSamplelessPockets: none within 3 voxels, every one within its spacing has them behind),
+  // filled (set inside), and their nodes: hollows a closure left, which no sample shows
+  // (docs/field-methods.md § Enclosed pockets and floating islands that no sample bounds).
   std::size_t pockets_filled = 0;
   std::size_t pocket_nodes_filled = 0;
   // Inside islands that no sample within 3 voxels or 1 spacing bounds, cut (set outside), and
