@@ -79,6 +79,7 @@ std::expected<BuildResult, Error> Build(const std::vector<Eigen::Vector3d>& devi
     hermite_options.hull_cut = options.hull_cut;
     hermite_options.smooth_closure = options.smooth_closure;
     hermite_options.sampleless_components = options.sampleless_components;
+    hermite_options.balls_stop_early = options.balls_stop_early;
     hermite_options.guard_positions = options.guard_positions;
     hermite_options.guard_normals = options.guard_normals;
     const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kClosureReach * r_max);

@@ -1197,8 +1197,10 @@ class ClosingRule {
     }
     return {best, threshold - lift};
   }
-  bool Inside(double w, const V3& p, NearestInBox* box = nullptr, std::optional<double> lift = std::nullopt) const {
-    return w >= 0.5 || BallPhi(w, p, box, 0.0, lift).phi < 0.0;
+  // `stop_below` as BallPhi's: any value ≤ 0 gives the same side (0: the first ball holding p).
+  bool Inside(double w, const V3& p, NearestInBox* box = nullptr, std::optional<double> lift = std::nullopt,
+              double stop_below = 0.0) const {
+    return w >= 0.5 || BallPhi(w, p, box, stop_below, lift).phi < 0.0;
   }
 
  private:
@@ -1303,7 +1305,7 @@ class ClosingRule {
 // inside the rule, CGAL's hippo1.ply's search took 1.86 G instructions; batched, 1.55 G).
 std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const Packing& inner, double reach_m,
                                                      const WindingNumber& winding, const WindingNumber* lift,
-                                                     const ClosingRule& rule) {
+                                                     const ClosingRule& rule, double side_below) {
   const std::size_t n = inner.centres.size();
   if (n < 2 || !(grid.voxel_m > 0.0) || !(reach_m > 0.0)) return std::nullopt;
   const double step = 0.5 * SparseField::kBrick * grid.voxel_m;
@@ -1337,7 +1339,7 @@ std::optional<Eigen::AlignedBox3d> ClosureBeyondGrid(const GridSpec& grid, const
       lifted.assign(p.size(), 0.0);
       if (lift != nullptr) (*lift)(p, lifted);
       for (std::size_t m = 0; m < p.size(); ++m)
-        if (rule.Inside(w[m], p[m], nullptr, lifted[m])) box.extend(p[m]);
+        if (rule.Inside(w[m], p[m], nullptr, lifted[m], side_below)) box.extend(p[m]);
     }
   });
   Eigen::AlignedBox3d box;
@@ -1674,13 +1676,16 @@ struct SideRules {
 void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const std::vector<V3>& normals,
                     const std::vector<V3>& guard_positions, const std::vector<V3>& guard_normals, const KdTree& tree,
                     const std::vector<double>& spacing, const SideRules& sides, bool hull_cut, bool smooth_closure,
-                    bool sampleless_components, HermiteStats& st) {
+                    bool sampleless_components, bool balls_stop_early, HermiteStats& st) {
   const GridSpec& grid = field.grid();
   const double h = grid.voxel_m;
   const auto band = static_cast<float>(grid.band_voxels);
   // A ball's phi (metres) below this is a band's depth wherever it is used: the balls' search may
   // stop there (ClosingRule::BallPhi's stop_below).
-  const double clamped_below = -static_cast<double>(band) * h * (1.0 + 1e-9);
+  // Off (HermiteOptions::balls_stop_early), every ball is visited: the same field, more slowly.
+  const double clamped_below =
+      balls_stop_early ? -static_cast<double>(band) * h * (1.0 + 1e-9) : -std::numeric_limits<double>::infinity();
+  const double side_below = balls_stop_early ? 0.0 : -std::numeric_limits<double>::infinity();
   constexpr int kB = SparseField::kBrick;
   const std::vector<double>& areas = sides.areas;
   const WindingNumber& winding = sides.winding;
@@ -1709,7 +1714,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
       for (std::size_t jk = 0; jk < p.size(); ++jk) {
         const std::size_t c = i * cd[1] * cd[2] + jk;
         corner_w[c] = static_cast<float>(w[jk]);
-        corner_in[c] = rule.Inside(w[jk], p[jk], nullptr, lift[jk]) ? 1 : 0;
+        corner_in[c] = rule.Inside(w[jk], p[jk], nullptr, lift[jk], side_below) ? 1 : 0;
       }
     }
   });
@@ -2124,7 +2129,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
         const double w = wn[f];
         if (closed_set && x <= 0.0f && w < kDiscPointMax) {
           const NearDiscs discs = near_discs(p, nearest);
-          if (w + discs.change < kDiscOutside && !rule.Inside(w, p, &nearest, lift[f])) {
+          if (w + discs.change < kDiscOutside && !rule.Inside(w, p, &nearest, lift[f], side_below)) {
             x = std::max(1e-6f, std::min(band, static_cast<float>(std::sqrt(discs.nearest2) / h)));
             ++local;
             // A thin open plate's slab reads spread w below kDiscOutside where it meets the face.
@@ -2154,7 +2159,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
           // hull: the estimate carried the scanned patches or a ball that does not continue the
           // surface on past the scan's edge (a wrist cut flat, a part's unscanned underside, a
           // head's open neck); w's outside decides, as where w is clear.
-          if (!closed_set && x <= 0.0f && !rule.Inside(w, p, &nearest, lift[f])) {
+          if (!closed_set && x <= 0.0f && !rule.Inside(w, p, &nearest, lift[f], side_below)) {
             nearest.Find(p, 1, &idx, &d2);
             found = true;
             carried = (rim[idx] != 0 && std::sqrt(d2) >= kCarrySpacings * spacing[idx]) || beyond_hull(p);
@@ -2164,7 +2169,7 @@ void LabelByWinding(SparseField& field, const std::vector<V3>& positions, const 
             if (unclear.back().second.wants_gradient) gradient_steps(p, steps);
             continue;
           }
-        } else if (x <= 0.0f && rule.Inside(w, p, &nearest, lift[f])) {
+        } else if (x <= 0.0f && rule.Inside(w, p, &nearest, lift[f], side_below)) {
           continue;  // closed by a rim's balls
         }
         if (!found) nearest.Find(p, 1, &idx, &d2);
@@ -2388,7 +2393,8 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
     // closure_reach_m), so no node is evaluated twice.
     if (options.closure_reach_m > 0.0) {
       st.closure_beyond_grid =
-          ClosureBeyondGrid(grid, st.inner, options.closure_reach_m, sides->winding, sides->lift.get(), sides->rule);
+          ClosureBeyondGrid(grid, st.inner, options.closure_reach_m, sides->winding, sides->lift.get(), sides->rule,
+                            options.balls_stop_early ? 0.0 : -std::numeric_limits<double>::infinity());
       if (st.closure_beyond_grid) {
         st.side_rules = rules;
         st.seconds_distance = SecondsSince(start);
@@ -2621,7 +2627,7 @@ SparseField HermiteField(const GridSpec& grid, const std::vector<V3>& positions,
   phase = std::chrono::steady_clock::now();
   if (options.winding_labels) {
     LabelByWinding(field, positions, normals, guard_positions, guard_normals, tree, spacing, *sides, options.hull_cut,
-                   options.smooth_closure, options.sampleless_components, st);
+                   options.smooth_closure, options.sampleless_components, options.balls_stop_early, st);
   } else {
     st.label_minority_votes = field.LabelUnallocatedBricks();
   }

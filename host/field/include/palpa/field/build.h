@@ -41,6 +41,8 @@ struct BuildOptions {
   bool smooth_closure = true;
   // kHermite: HermiteOptions::sampleless_components. Off only to measure what it prevents (tests).
   bool sampleless_components = true;
+  // kHermite: HermiteOptions::balls_stop_early. Off only to show the early stop changes nothing (tests).
+  bool balls_stop_early = true;
   // kHermite: when an open scan's closure goes on past the grid's faces, grow the grid (same
   // voxel, up to half the samples' longest side per side) to hold it before the field is
   // evaluated (HermiteStats::closure_beyond_grid). false keeps the grid fitted to the samples.

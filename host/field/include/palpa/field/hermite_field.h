@@ -93,6 +93,10 @@ struct HermiteOptions {
   // bounds are filled and cut, last (HermiteStats::pockets_filled, islands_cut; pockets.h). Off
   // only to measure what it prevents.
   bool sampleless_components = true;
+  // The closing rule's ball search ends at the first ball deep enough for its caller: below the
+  // band where the depth is clamped to it, below 0 where only the side is read. false: every ball
+  // is visited and the deepest taken, only to show the early stop changes no node (tests).
+  bool balls_stop_early = true;
   // > 0 (metres): before any node is evaluated, find whether an open scan's closure goes on past
   // the grid, within this reach of the grid's box, with the winding number and closing rule the
   // labelling uses (HermiteStats::closure_beyond_grid). If it does, HermiteField returns at once
