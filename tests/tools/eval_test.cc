@@ -56,7 +56,7 @@ TEST(Eval, ConstantOffsetIsTheMeanSignedError) {
       for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
         const double t = SphereSdfVoxels(s, s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
         band += std::abs(t) <= 3;
-        wrong += t < 0 && t > -0.5;
+        wrong += t < -mesh::EvalOptions{}.on_surface_voxels && t > -0.5;
       }
   EXPECT_EQ(r->band_nodes, band);
   EXPECT_EQ(r->wrong_sign_in_band, wrong);
@@ -102,6 +102,59 @@ TEST(Eval, PercentileMaxAndGrossSignsOnPlantedErrors) {
   EXPECT_NEAR(r->gross_wrong_sign_percent, 100.0 * static_cast<double>(deep) / static_cast<double>(r->nodes), 1e-9);
   EXPECT_EQ(r->wrong_sign_in_band, planted_wrong);
   EXPECT_GT(planted_wrong, 0u);
+}
+
+// A box whose top face lies 1e-6 voxel below a node plane, as a bounding face does under --fit:
+// that plane's nodes are outside by 1e-6 voxel, and a field 0.35 voxel too far out reads them
+// inside (and the bottom face's outer layer, 0.3 voxel out, truly wrong). Their sign is the points' rounding, not the
+// field's: on the surface, not scored. The count is the closed form's, node by node; with the tolerance off (0) the
+// plane's nodes count.
+TEST(Eval, NodesOnTheSurfaceAreNotScoredForSign) {
+  BlobSpec s;
+  s.dims = {40, 36, 44};
+  s.voxel_m = 1e-3;
+  s.origin_m = Eigen::Vector3d(-0.02, -0.018, -0.022);
+  s.fit_scale = 1e-3;  // model millimetres
+  s.fit_offset_m = Eigen::Vector3d::Zero();
+  const Eigen::Vector3d lo(-12.3, -9.1, -14.7);
+  const Eigen::Vector3d hi(11.6, 10.2, 10.0 - 1e-6);  // z = 10 mm is node plane k = 32
+  const auto box_sdf_voxels = [&](const Eigen::Vector3d& x_m) {
+    const Eigen::Vector3d p = x_m / s.fit_scale;
+    const Eigen::Vector3d q = (p - 0.5 * (lo + hi)).cwiseAbs() - 0.5 * (hi - lo);
+    return (q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0)) * s.fit_scale / s.voxel_m;
+  };
+  const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return box_sdf_voxels(x) - 0.35; });
+  auto truth = mesh::TrueDistances(View(bytes), Truth::Mesh(Box(lo, hi)), 3);
+  ASSERT_TRUE(truth) << truth.error().message;
+  const double tolerance = mesh::EvalOptions{}.on_surface_voxels;
+  ASSERT_GT(tolerance, 1e-5);  // well above the plane's 1e-6 and the truth's float rounding
+  ASSERT_LT(tolerance, 0.01);  // well below the field's error
+  std::size_t on_plane = 0;
+  std::size_t wrong = 0;  // outside by more than the tolerance and less than 0.35
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 36; ++j)
+      for (int k = 0; k < 44; ++k) {
+        const double t = box_sdf_voxels(s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
+        on_plane += std::abs(t) <= 3 && std::abs(t) <= tolerance;
+        wrong += t > tolerance && t < 0.35;
+      }
+  // The top face's nodes: x in [−12.3, 11.6] mm holds 24 nodes, y in [−9.1, 10.2] mm 20; the
+  // bottom face (z = −14.7 mm) has 24 × 20 nodes 0.3 voxel below it.
+  EXPECT_EQ(on_plane, 24u * 20u);
+  EXPECT_EQ(wrong, 24u * 20u);
+  auto r = mesh::Evaluate(View(bytes), *truth);
+  ASSERT_TRUE(r) << r.error().message;
+  EXPECT_EQ(r->on_surface_nodes, on_plane);
+  EXPECT_EQ(r->wrong_sign_in_band, wrong);
+  mesh::EvalOptions strict;
+  strict.on_surface_voxels = 0;
+  auto all = mesh::Evaluate(View(bytes), *truth, strict);
+  ASSERT_TRUE(all) << all.error().message;
+  EXPECT_EQ(all->on_surface_nodes, 0u);
+  EXPECT_EQ(all->wrong_sign_in_band, wrong + on_plane);
+  EXPECT_NEAR(all->mean_abs_error, r->mean_abs_error, 1e-12);  // errors are scored alike
+  strict.on_surface_voxels = 1;                                // not below gross_beyond_voxels: refused
+  EXPECT_FALSE(mesh::Evaluate(View(bytes), *truth, strict));
 }
 
 // A box's signed distance is known in closed form; its 12 large triangles exercise both the
@@ -505,6 +558,22 @@ TEST_F(EvalCli, SphereAndMeshTruthsAsAUserRunsThem) {
   EXPECT_NEAR(JsonNumber(r.out, "max_abs_error"), 0.5, 1e-4) << r.out;
   EXPECT_EQ(JsonNumber(r.out, "gross_wrong_sign"), 0) << r.out;
   EXPECT_EQ(JsonNumber(r.out, "far_wrong"), 0) << r.out;
+  // --on-surface 0.25: nodes within a quarter voxel are not scored for sign, so only those
+  // inside by 0.25-0.5 voxel read wrong; counted node by node from the analytic sphere.
+  std::size_t near = 0;
+  std::size_t wrong = 0;
+  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
+    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
+      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
+        const double t = SphereSdfVoxels(s, s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
+        near += std::abs(t) <= 0.25;
+        wrong += t < -0.25 && t > -0.5;
+      }
+  const Outcome q = Palpa("eval " + field + " --sphere 10 --json --on-surface 0.25");
+  ASSERT_EQ(q.code, 0) << q.out;
+  EXPECT_EQ(JsonNumber(q.out, "on_surface_nodes"), static_cast<double>(near)) << q.out;
+  EXPECT_EQ(JsonNumber(q.out, "wrong_sign_in_band"), static_cast<double>(wrong)) << q.out;
+  EXPECT_GT(wrong, 1000u);
   // The same sphere as a tessellated mesh file (model units) gives the same score to the sagitta.
   const std::string off = Write("sphere.off", ToOff(Icosphere(5, kSphereRadiusModel)));
   const Outcome m = Palpa("eval " + field + " --mesh " + off);
@@ -591,6 +660,7 @@ TEST_F(EvalCli, BadInputsExitTwo) {
       {"eval " + bad_off + " --sphere 10", "bad.off"},
       {"eval " + field + " --sphere 10 --band 7", "narrow band (6 voxels inside, 6 outside)"},
       {"eval " + field + " --sphere 0", "positive radius"},
+      {"eval " + field + " --sphere 10 --on-surface 0.6", "--on-surface"},
   };
   for (const Case& c : cases) {
     const Outcome r = Palpa(c.args);

@@ -103,9 +103,10 @@ struct EvalArgs {
   std::string mesh;                     ///< truth: closed .off mesh in model units, or
   std::optional<double> sphere_radius;  ///< truth: sphere of this radius (model units) at the model origin
   bool json = false;
-  double band_voxels = 3;      ///< score nodes with |true| ≤ this
-  bool band_given = false;     ///< --band on the command line (else 3, or less to fit the field's bands)
-  int threads = 0;             ///< 0: all cores
+  double band_voxels = 3;                 ///< score nodes with |true| ≤ this
+  bool band_given = false;                ///< --band on the command line (else 3, or less to fit the field's bands)
+  double on_surface_voxels = 1.0 / 1024;  ///< |true| ≤ this: sign not scored (EvalOptions::on_surface_voxels)
+  int threads = 0;                        ///< 0: all cores
   std::string candidate_mesh;  ///< score this closed .off mesh (model units) on FIELD's grid instead of FIELD
   std::string far_out;         ///< FAR.xyz: every far wrong-sign node (model units), written atomically
 };

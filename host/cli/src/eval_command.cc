@@ -47,6 +47,7 @@ nlohmann::ordered_json ScoreJson(const mesh::EvalResult& r) {
           {"max_error_at_m", {r.max_error_at_m.x(), r.max_error_at_m.y(), r.max_error_at_m.z()}},
           {"wrong_sign_in_band", r.wrong_sign_in_band},
           {"wrong_sign_in_band_percent", r.wrong_sign_in_band_percent},
+          {"on_surface_nodes", r.on_surface_nodes},
           {"gross_wrong_sign", r.gross_wrong_sign},
           {"gross_wrong_sign_percent", r.gross_wrong_sign_percent},
           {"far_wrong", r.far_wrong()},
@@ -120,6 +121,7 @@ int RunEval(const EvalArgs& args) {
   // Stored φ is exact only within both bands (v2: 6 inside, 2 outside by default); beyond, it is
   // the clamp, and scoring there would measure the clamp. The default band (3) shrinks to fit.
   mesh::EvalOptions options;
+  options.on_surface_voxels = args.on_surface_voxels;
   // (Evaluate refuses a wider band too; here it is refused before the truth is computed.)
   // A candidate mesh has an exact distance everywhere: FIELD lends it only its grid.
   const bool candidate = !args.candidate_mesh.empty();
@@ -210,7 +212,8 @@ int RunEval(const EvalArgs& args) {
   fmt::print("  max |error|         {:.4f} voxels at ({:.6f}, {:.6f}, {:.6f}) m\n", r.max_abs_error,
              r.max_error_at_m.x(), r.max_error_at_m.y(), r.max_error_at_m.z());
   fmt::print("  mean signed error   {:+.4f} voxels\n", r.mean_signed_error);
-  fmt::print("  wrong sign in band  {:.3f} % ({} nodes)\n", r.wrong_sign_in_band_percent, r.wrong_sign_in_band);
+  fmt::print("  wrong sign in band  {:.3f} % ({} nodes; {} on the surface, |true| <= {:g} voxels, not scored)\n",
+             r.wrong_sign_in_band_percent, r.wrong_sign_in_band, r.on_surface_nodes, options.on_surface_voxels);
   fmt::print("  gross wrong sign    {:.4f} % of all {} nodes ({} nodes with |true| > 1 voxel)\n",
              r.gross_wrong_sign_percent, r.nodes, r.gross_wrong_sign);
   fmt::print("  far wrong sign      {} nodes with |true| > {:g} voxels\n", r.far_wrong(), options.far_beyond_voxels);

@@ -257,6 +257,10 @@ int main(int argc, char** argv) {
                                      "smaller band, e.g. a v2 field's outside band of 2)")
                         ->capture_default_str()
                         ->check(CLI::Range(0.5, 64.0));
+  eval->add_option("--on-surface", ea.on_surface_voxels,
+                   "Nodes with |true| <= this many voxels are on the surface: their sign is not scored "
+                   "(default 1/1024: a face on a node plane leaves the sign to the points' rounding)")
+      ->check(CLI::Range(0.0, 0.5));
   eval->add_option("--far-out", ea.far_out,
                    "Also write every far wrong-sign node (|true| > 3 voxels) as 'x y z depth kind' lines: model "
                    "units, depth |true| in voxels, kind phantom (inside where the truth is outside) or hole");

@@ -240,6 +240,9 @@ std::expected<EvalResult, Error> Score(const Phi& phi_at, const TrueDistanceGrid
   if (!(options.band_voxels > 0) || options.band_voxels > truth.exact_within_voxels)
     return std::unexpected(Error{fmt::format("band {} voxels is outside (0, {}], where the truth is exact",
                                              options.band_voxels, truth.exact_within_voxels)});
+  if (!(options.on_surface_voxels >= 0) || !(options.on_surface_voxels < options.gross_beyond_voxels))
+    return std::unexpected(Error{fmt::format("on_surface_voxels {} must be in [0, gross_beyond_voxels {})",
+                                             options.on_surface_voxels, options.gross_beyond_voxels)});
   if (!(options.far_beyond_voxels > 0) || options.far_beyond_voxels < options.gross_beyond_voxels)
     return std::unexpected(
         Error{fmt::format("far_beyond_voxels {} must be positive and at least gross_beyond_voxels {}",
@@ -257,8 +260,10 @@ std::expected<EvalResult, Error> Score(const Phi& phi_at, const TrueDistanceGrid
   for (std::size_t n = 0; n < r.nodes; ++n) {
     const double phi = phi_at(n);
     const double t = truth.voxels[n];
-    const bool wrong = (phi <= 0 && t > 0) || (phi > 0 && t < 0);
+    const bool on_surface = std::abs(t) <= options.on_surface_voxels;
+    const bool wrong = !on_surface && ((phi <= 0 && t > 0) || (phi > 0 && t < 0));
     if (std::abs(t) <= options.band_voxels) {
+      r.on_surface_nodes += on_surface ? 1 : 0;
       const double e = phi - t;
       abs_errors.push_back(static_cast<float>(std::abs(e)));
       sum_abs += std::abs(e);

@@ -81,7 +81,12 @@ struct EvalOptions {
   double band_voxels = 3;          ///< score nodes with |true| ≤ this (issue 5: 3 voxels)
   double gross_beyond_voxels = 1;  ///< a wrong sign is "gross" when |true| > this
   double far_beyond_voxels = 3;    ///< a wrong sign is "far" when |true| > this (issue 20)
-  bool list_far_nodes = false;     ///< fill FarWrong::listed (palpa eval --far-out)
+  /// A node with |true| ≤ this lies on the surface: its sign is not scored (either is right).
+  /// 1/1024 voxel: a quarter of the v2 payload's 1/256-voxel step, and far above what decides
+  /// such a node's sign in practice — the 9 significant digits of a point file (~1e-7 voxel at
+  /// 150 cells) when a flat face falls on a node plane, as a bounding face does under --fit.
+  double on_surface_voxels = 1.0 / 1024;
+  bool list_far_nodes = false;  ///< fill FarWrong::listed (palpa eval --far-out)
 };
 
 /// Far wrong-sign nodes on one side of the surface: phantom solid (φ ≤ 0 where the truth is
@@ -100,7 +105,8 @@ struct FarWrong {
 };
 
 /// The score, in voxels (1 voxel = field.voxel_m metres). Error e = φ − true at a node.
-/// A node has the wrong sign when φ ≤ 0 and true > 0, or φ > 0 and true < 0 (true = 0: never).
+/// A node has the wrong sign when φ ≤ 0 and true > 0, or φ > 0 and true < 0, and |true| >
+/// EvalOptions::on_surface_voxels (nearer, never).
 struct EvalResult {
   std::size_t nodes = 0;                    ///< all nodes of the grid
   std::size_t band_nodes = 0;               ///< nodes with |true| ≤ band_voxels
@@ -110,6 +116,7 @@ struct EvalResult {
   double mean_signed_error = 0;             ///< mean e over the band, voxels (> 0: field too far out)
   Eigen::Vector3d max_error_at_m{0, 0, 0};  ///< device position of the node with max |e|, m
   std::size_t wrong_sign_in_band = 0;       ///< band nodes with the wrong sign
+  std::size_t on_surface_nodes = 0;         ///< band nodes with |true| ≤ on_surface_voxels (sign not scored)
   double wrong_sign_in_band_percent = 0;    ///< 100·wrong_sign_in_band / band_nodes
   std::size_t gross_wrong_sign = 0;         ///< nodes with |true| > gross_beyond_voxels and the wrong sign
   double gross_wrong_sign_percent = 0;      ///< 100·gross_wrong_sign / nodes (ALL nodes)
