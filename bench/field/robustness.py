@@ -18,7 +18,9 @@ normals turned as in the normal-noise row (a scanner's estimated normals; judged
 virtual range scans from 6 views on the upper hemisphere, `palpa sample --views 6`, without and
 with range noise of 0.5 voxel). Every set is built with `palpa build --cells 150 --format 1` (dense, so the band
 of 3 voxels is exact on both sides) and scored with `palpa eval --mesh` against the closed mesh:
-band mean |error| and wrong sign (voxels, |true| <= 3), far wrong-sign nodes (|true| > 3: phantom
+band mean |error| and wrong sign (voxels, |true| <= 3; a node within 1/1024 voxel of the surface, as
+whole planes of nodes are when a bounding face falls on a node plane, is not scored for sign, for
+palpa and Poisson alike: `palpa eval --on-surface`), far wrong-sign nodes (|true| > 3: phantom
 solid + holes), inside nodes on the grid faces (`palpa export`), and build time. The perturbations
 use Python's `random` with fixed seeds: every run gives the same inputs (`--seed N` draws
 another set: palpa sample's seed and the perturbations'). `--compare` runs a second
