@@ -22,6 +22,18 @@ namespace {
 using mesh::EvalResult;
 using mesh::Truth;
 
+// Calls visit(node position in metres, the analytic sphere's true distance there in voxels) at
+// every node of `s`'s grid.
+template <typename Visit>
+void ForEachSphereNode(const BlobSpec& s, Visit visit) {
+  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
+    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
+      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
+        const Eigen::Vector3d x = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
+        visit(x, SphereSdfVoxels(s, x));
+      }
+}
+
 TEST(Eval, ExactSphereFieldScoresZero) {
   const BlobSpec s = SphereSpec();
   const auto bytes = MakeBlob(s, [&](const Eigen::Vector3d& x) { return SphereSdfVoxels(s, x); });
@@ -51,13 +63,10 @@ TEST(Eval, ConstantOffsetIsTheMeanSignedError) {
   EXPECT_NEAR(r->max_abs_error, 0.5, 1e-5);
   std::size_t band = 0;
   std::size_t wrong = 0;
-  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
-    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
-      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
-        const double t = SphereSdfVoxels(s, s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
-        band += std::abs(t) <= 3;
-        wrong += t < -mesh::EvalOptions{}.on_surface_voxels && t > -0.5;
-      }
+  ForEachSphereNode(s, [&](const Eigen::Vector3d&, double t) {
+    band += std::abs(t) <= 3;
+    wrong += t < -mesh::EvalOptions{}.on_surface_voxels && t > -0.5;
+  });
   EXPECT_EQ(r->band_nodes, band);
   EXPECT_EQ(r->wrong_sign_in_band, wrong);
   EXPECT_GT(wrong, 1000u);
@@ -82,16 +91,12 @@ TEST(Eval, PercentileMaxAndGrossSignsOnPlantedErrors) {
   std::size_t planted_wrong = 0;  // inside by less than 2 voxels: +2 makes them read outside
   std::size_t deep = 0;
   std::size_t band = 0;
-  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
-    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
-      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
-        const Eigen::Vector3d x = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
-        const double t = SphereSdfVoxels(s, x);
-        band += std::abs(t) <= 3;
-        planted += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3;
-        planted_wrong += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3 && t < 0 && t + 2 > 0;
-        deep += (x - centre).norm() < 5e-3;
-      }
+  ForEachSphereNode(s, [&](const Eigen::Vector3d& x, double t) {
+    band += std::abs(t) <= 3;
+    planted += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3;
+    planted_wrong += std::abs(t) <= 3 && x.x() > centre.x() + 19.5e-3 && t < 0 && t + 2 > 0;
+    deep += (x - centre).norm() < 5e-3;
+  });
   ASSERT_GT(planted, 0u);
   EXPECT_NEAR(r->max_abs_error, 2.0, 1e-5);
   EXPECT_NEAR(r->max_error_at_m.x(), centre.x() + 20e-3, 3.5e-3);  // on the cap, in the band
@@ -431,14 +436,10 @@ TEST(Eval, FarWrongSignsArePhantomSolidAndHolesWithTheirDepth) {
   std::size_t holes = 0;
   double phantom_depth = 0;
   double hole_depth = 0;
-  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
-    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
-      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
-        const Eigen::Vector3d x = s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k);
-        const double t = SphereSdfVoxels(s, x);
-        if (planted_phantom(x)) ++phantoms, phantom_depth = std::max(phantom_depth, t);
-        if (planted_hole(x)) ++holes, hole_depth = std::max(hole_depth, -t);
-      }
+  ForEachSphereNode(s, [&](const Eigen::Vector3d& x, double t) {
+    if (planted_phantom(x)) ++phantoms, phantom_depth = std::max(phantom_depth, t);
+    if (planted_hole(x)) ++holes, hole_depth = std::max(hole_depth, -t);
+  });
   ASSERT_GT(phantoms, 50u);
   ASSERT_GT(holes, 200u);
   const blob::FieldView view = View(bytes);
@@ -562,13 +563,10 @@ TEST_F(EvalCli, SphereAndMeshTruthsAsAUserRunsThem) {
   // inside by 0.25-0.5 voxel read wrong; counted node by node from the analytic sphere.
   std::size_t near = 0;
   std::size_t wrong = 0;
-  for (std::uint32_t i = 0; i < s.dims[0]; ++i)
-    for (std::uint32_t j = 0; j < s.dims[1]; ++j)
-      for (std::uint32_t k = 0; k < s.dims[2]; ++k) {
-        const double t = SphereSdfVoxels(s, s.origin_m + s.voxel_m * Eigen::Vector3d(i, j, k));
-        near += std::abs(t) <= 0.25;
-        wrong += t < -0.25 && t > -0.5;
-      }
+  ForEachSphereNode(s, [&](const Eigen::Vector3d&, double t) {
+    near += std::abs(t) <= 0.25;
+    wrong += t < -0.25 && t > -0.5;
+  });
   const Outcome q = Palpa("eval " + field + " --sphere 10 --json --on-surface 0.25");
   ASSERT_EQ(q.code, 0) << q.out;
   EXPECT_EQ(JsonNumber(q.out, "on_surface_nodes"), static_cast<double>(near)) << q.out;

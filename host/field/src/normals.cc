@@ -1109,6 +1109,25 @@ struct SheetProbeWinding {
   std::vector<std::vector<StackedPair>> stacked;
 };
 
+// Sheets: samples joined in the kSheetGraph-nearest graph by chords along both tangent planes
+// and normals within `cut`'s angle of each other, signs included (a sign boundary on one smooth
+// sheet, or the two sides of a thin wall, separate them), over the pairs `apart(i, j)` does not
+// keep apart.
+template <typename Apart>
+detail::UnionFind JoinSheets(const std::vector<V3>& positions, const std::vector<V3>& normals,
+                             const std::vector<std::array<std::uint32_t, kSheetGraph>>& graph, const SheetCut& cut,
+                             Apart apart) {
+  const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
+  detail::UnionFind joined(positions.size());
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    for (const std::uint32_t j : graph[i]) {
+      if (j == i || apart(static_cast<std::uint32_t>(i), j)) continue;
+      if (detail::OneSheet(positions[j] - positions[i], normals[i], normals[j], min_dot, cut.chord))
+        joined.Unite(static_cast<std::uint32_t>(i), j);
+    }
+  return joined;
+}
+
 // One pass of FlipSheetsByWinding with the sheets of `cut`.
 // `facing`: the energy has the facing term (kFacingWeight; clean lines only).
 std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normals,
@@ -1128,19 +1147,10 @@ std::size_t TurnSheets(const std::vector<V3>& positions, std::vector<V3>& normal
   const std::vector<double>& offsets = probes.offsets();
   const detail::KdTree& tree = neighbours.tree;
 
-  // Sheets: samples joined in the kSheetGraph-nearest graph by chords along both tangent planes
-  // and normals within the cut's angle of each other, signs included (a sign boundary on one
-  // smooth sheet, or the two sides of a thin wall, separate them), and not across a thin wall
-  // (kThinWallShare).
-  const std::vector<std::array<std::uint32_t, kSheetGraph>>& graph = neighbours.graph;
-  const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
-  detail::UnionFind joined(n);
-  for (std::size_t i = 0; i < n; ++i)
-    for (const std::uint32_t j : graph[i]) {
-      if (j == i || OnOtherSides(other_sides, static_cast<std::uint32_t>(i), j)) continue;
-      if (detail::OneSheet(positions[j] - positions[i], normals[i], normals[j], min_dot, cut.chord))
-        joined.Unite(static_cast<std::uint32_t>(i), j);
-    }
+  // Sheets (JoinSheets), not across a thin wall (kThinWallShare).
+  detail::UnionFind joined =
+      JoinSheets(positions, normals, neighbours.graph, cut,
+                 [&](std::uint32_t i, std::uint32_t j) { return OnOtherSides(other_sides, i, j); });
   std::vector<std::vector<std::uint32_t>> members(n);
   for (std::size_t i = 0; i < n; ++i)
     members[joined.Find(static_cast<std::uint32_t>(i))].push_back(static_cast<std::uint32_t>(i));
@@ -1719,8 +1729,13 @@ void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_major
   if (given_are_jet_lines &&
       (report.neighbours == kCleanNormalNeighbours ||
        (report.neighbours == kNormalNeighbours && report.noise_figure >= 0 && report.noise_figure < kSheetPassNoise))) {
-    std::vector<V3> now(pieces, V3::Zero());
-    for (std::size_t i = 0; i < n; ++i) now[component[i]] += areas[i] * normals[i];
+    // Each piece's flux sum_i a_i m_i.
+    const auto piece_flux_of = [&](const std::vector<V3>& m) {
+      std::vector<V3> sum(pieces, V3::Zero());
+      for (std::size_t i = 0; i < n; ++i) sum[component[i]] += areas[i] * m[i];
+      return sum;
+    };
+    std::vector<V3> now = piece_flux_of(normals);
     std::vector<std::uint8_t> closed(n, 0);
     bool any = false;
     for (std::size_t i = 0; i < n; ++i) {
@@ -1744,8 +1759,7 @@ void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_major
       std::vector<V3> trial = normals;
       std::size_t trial_sheets = 0;
       if (FlipSheetsOn(shared, trial, open_piece, trial_sheets, fraction, clean_lines) == 0) return;
-      std::vector<V3> after(pieces, V3::Zero());
-      for (std::size_t i = 0; i < n; ++i) after[component[i]] += areas[i] * trial[i];
+      const std::vector<V3> after = piece_flux_of(trial);
       std::vector<std::uint8_t> stands(pieces, 0);  // an open piece the trial closes
       for (std::size_t i = 0; i < n; ++i)
         stands[component[i]] =
@@ -1767,8 +1781,7 @@ void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_major
     // 1,802 samples, inward; flux 0.72 of the area, past kOpenSheetMostFlux; 40.8 % of the band
     // wrong and 426,826 far-wrong nodes). The trial runs again with such sheets on pieces with few
     // rims, and stands only where it closes a piece.
-    for (std::size_t i = 0; i < n; ++i) now[component[i]] = V3::Zero();
-    for (std::size_t i = 0; i < n; ++i) now[component[i]] += areas[i] * normals[i];
+    now = piece_flux_of(normals);
     std::vector<std::uint8_t> wide(pieces, 0);  // still open by the flux
     bool any_wide = false;
     for (std::size_t i = 0; i < n; ++i) {
@@ -1782,15 +1795,9 @@ void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_major
       std::vector<double> best_after(pieces, std::numeric_limits<double>::infinity());
       std::vector<std::vector<std::uint32_t>> best_sheet(pieces);
       for (const SheetCut& cut : kSheetCuts) {
-        const double min_dot = std::cos(cut.angle_deg * std::numbers::pi / 180.0);
-        detail::UnionFind joined(n);
-        for (std::size_t i = 0; i < n; ++i) {
-          if (wide[component[i]] == 0) continue;
-          for (const std::uint32_t j : neighbours.graph[i])
-            if (j != i && component[j] == component[i] &&
-                detail::OneSheet(positions[j] - positions[i], normals[i], normals[j], min_dot, cut.chord))
-              joined.Unite(static_cast<std::uint32_t>(i), j);
-        }
+        detail::UnionFind joined = JoinSheets(
+            positions, normals, neighbours.graph, cut,
+            [&](std::uint32_t i, std::uint32_t j) { return wide[component[i]] == 0 || component[j] != component[i]; });
         std::vector<V3> sheet_flux(n, V3::Zero());
         std::vector<std::size_t> sheet_size(n, 0);
         for (std::size_t i = 0; i < n; ++i) {
@@ -1852,8 +1859,7 @@ void OrientOn(SheetGraph& shared, std::vector<V3>& normals, bool keep_file_major
       // (two equal faces seen from one side) lowers it.
       std::vector<V3> turned = normals;
       std::vector<std::uint8_t> tried(pieces, 0);
-      std::vector<V3> left(pieces, V3::Zero());  // each piece's flux after the sheet pass
-      for (std::size_t i = 0; i < n; ++i) left[component[i]] += areas[i] * normals[i];
+      const std::vector<V3> left = piece_flux_of(normals);  // after the sheet pass
       for (std::size_t c = 0; c < pieces; ++c) {
         if (best_sheet[c].empty() || left[c].norm() < detail::kClosedFlux * area[c]) continue;
         bool gated = false;
